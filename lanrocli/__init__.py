@@ -1,0 +1,8 @@
+"""lanro: language-conditioned reinforcement learning for a simulated Panda arm that recovers from corrections."""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("lanro")
+except PackageNotFoundError:  # running from a source tree that was never installed
+    __version__ = "0.0.0"

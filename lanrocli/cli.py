@@ -1,0 +1,126 @@
+"""The ``lanro`` command line: parses options, calls the package, prints with rich, sets exit codes."""
+
+from __future__ import annotations
+
+import json
+import sys
+from enum import Enum
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from lanrocli import __version__
+from lanrocli.language import all_sentences, grammar_vocabulary, sample_sentence, sentence_stats
+
+app = typer.Typer(
+    name="lanro",
+    help="Train and evaluate a simulated Panda arm that follows language instructions and recovers from corrections.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+class TaskName(str, Enum):
+    reach = "reach"
+    push = "push"
+    grasp = "grasp"
+    lift = "lift"
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"lanro {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def main(
+    version: Annotated[
+        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")
+    ] = False,
+) -> None:
+    """Train and evaluate a simulated Panda arm that follows language instructions and recovers from corrections."""
+
+
+@app.command("sample-instructions")
+def sample_instructions(
+    task: Annotated[TaskName, typer.Option(help="Task whose verbs the instructor uses.")] = TaskName.reach,
+    n: Annotated[int, typer.Option("--n", min=1, help="How many sentences to sample.")] = 10,
+    seed: Annotated[int, typer.Option(min=0, help="Random seed; the same seed gives the same sentences.")] = 0,
+    corrections: Annotated[bool, typer.Option("--corrections", help="Append a correction to each instruction.")] = False,
+    negations: Annotated[bool, typer.Option("--negations", help="Allow the negation beginning ('not the ...').")] = False,
+    rare: Annotated[bool, typer.Option("--rare", help="Allow rare colour words in instructions.")] = False,
+    enumerate_all: Annotated[
+        bool, typer.Option("--all", help="Enumerate every sentence of the grammar instead of sampling.")
+    ] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON array on stdout.")] = False,
+    stats: Annotated[
+        bool, typer.Option("--stats", help="Print counts (distinct sentences, vocabulary size, L, per form) only.")
+    ] = False,
+) -> None:
+    """Show sentences the instructor can speak: sampled, or all of them."""
+    if negations and not corrections:
+        raise typer.BadParameter("--negations only affects corrections; add --corrections", param_hint="--negations")
+    if enumerate_all:
+        sentences = all_sentences(task.value, corrections, negations, rare)
+    else:
+        rng = np.random.default_rng(seed)
+        sentences = iter([sample_sentence(rng, task.value, corrections, negations, rare) for _ in range(n)])
+    vocab = grammar_vocabulary()
+    console = Console()
+
+    if stats:
+        st = sentence_stats(sentences)
+        summary = {
+            "task": task.value,
+            "sentences": st.sentences,
+            "distinct_sentences": st.distinct,
+            "vocabulary_size": len(vocab),
+            "max_length": vocab.max_length,
+            "by_form": st.by_form,
+            "by_beginning": st.by_beginning,
+        }
+        if as_json:
+            typer.echo(json.dumps(summary))
+            return
+        table = Table(title=f"grammar statistics: {task.value}", show_header=False)
+        table.add_row("sentences", str(st.sentences))
+        table.add_row("distinct sentences", str(st.distinct))
+        table.add_row("vocabulary size (with <pad>, <unk>)", str(len(vocab)))
+        table.add_row("L (padded length)", str(vocab.max_length))
+        for form, count in st.by_form.items():
+            table.add_row(f"instruction form {form}", str(count))
+        for kind, count in st.by_beginning.items():
+            table.add_row(f"correction beginning {kind}", str(count))
+        console.print(table)
+        return
+
+    if as_json:
+        out = sys.stdout
+        out.write("[")
+        for i, s in enumerate(sentences):
+            item = {
+                "instruction": s.instruction,
+                "correction": s.correction,
+                "text": s.text,
+                "tokens": vocab.encode(s.text).tolist(),
+            }
+            out.write(("," if i else "") + "\n" + json.dumps(item))
+        out.write("\n]\n")
+        return
+    if enumerate_all:
+        for s in sentences:
+            typer.echo(s.text)
+        return
+    table = Table(title=f"{task.value}: {n} sampled sentences (seed {seed})")
+    table.add_column("#", justify="right")
+    table.add_column("instruction")
+    table.add_column("correction")
+    table.add_column("tokens")
+    for i, s in enumerate(sentences):
+        table.add_row(str(i), s.instruction, s.correction or "", " ".join(map(str, vocab.encode(s.text))))
+    console.print(table)

@@ -1,0 +1,70 @@
+"""The instructor's language: object properties, the grammar of instructions and corrections, the vocabulary.
+
+Pure Python and numpy: nothing here knows of physics or torch.
+"""
+
+from lanrocli.language.grammar import (
+    BEGINNING_WORDS,
+    Beginning,
+    Form,
+    Phrase,
+    Sentence,
+    all_corrections,
+    all_instructions,
+    all_phrases,
+    all_sentences,
+    ambiguous_phrases,
+    beginning_kinds,
+    correction,
+    extend,
+    identifying_phrases,
+    instruction,
+    object_phrases,
+    sample_sentence,
+    sentence_stats,
+)
+from lanrocli.language.properties import (
+    COLOURS,
+    RARE_COLOUR_WORDS,
+    SHAPE_WORDS,
+    SHAPES,
+    TASK_VERBS,
+    TASKS,
+    ObjectProps,
+    check_task,
+)
+from lanrocli.language.vocabulary import PAD_ID, UNK_ID, SentenceTooLong, Vocabulary, grammar_vocabulary
+
+__all__ = [
+    "BEGINNING_WORDS",
+    "COLOURS",
+    "PAD_ID",
+    "RARE_COLOUR_WORDS",
+    "SHAPES",
+    "SHAPE_WORDS",
+    "TASKS",
+    "TASK_VERBS",
+    "UNK_ID",
+    "Beginning",
+    "Form",
+    "ObjectProps",
+    "Phrase",
+    "Sentence",
+    "SentenceTooLong",
+    "Vocabulary",
+    "all_corrections",
+    "all_instructions",
+    "all_phrases",
+    "all_sentences",
+    "ambiguous_phrases",
+    "beginning_kinds",
+    "check_task",
+    "correction",
+    "extend",
+    "grammar_vocabulary",
+    "identifying_phrases",
+    "instruction",
+    "object_phrases",
+    "sample_sentence",
+    "sentence_stats",
+]

@@ -1,0 +1,69 @@
+"""The objects' properties and the task verbs: the words the instructor may use for each.
+
+Canonical names (``"red"``, ``"cuboid"``, ``"push"``) identify a property everywhere in the code; the
+words are only what the instructor says. Keeping both apart lets the instructor vary its wording
+(synonyms, rare words) while tasks, scenes and relabelling reason about canonical properties.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+COLOURS: tuple[str, ...] = ("red", "green", "blue", "yellow", "purple", "orange", "pink", "cyan", "brown")
+
+# One rare word per colour for the "lack of common ground" case: a word that names the colour but that
+# an agent trained on the common words has likely never read.
+RARE_COLOUR_WORDS: dict[str, str] = {
+    "red": "scarlet",
+    "green": "emerald",
+    "blue": "azure",
+    "yellow": "lemon",
+    "purple": "violet",
+    "orange": "tangerine",
+    "pink": "rose",
+    "cyan": "turquoise",
+    "brown": "chestnut",
+}
+
+SHAPES: tuple[str, ...] = ("cube", "cuboid", "cylinder")
+
+# Word classes from the paper's appendix: every word of a class names the same shape.
+SHAPE_WORDS: dict[str, tuple[str, ...]] = {
+    "cube": ("cube", "box", "block"),
+    "cuboid": ("cuboid", "brick", "oblong"),
+    "cylinder": ("cylinder", "barrel", "tophat"),
+}
+
+TASKS: tuple[str, ...] = ("reach", "push", "grasp", "lift")
+
+TASK_VERBS: dict[str, tuple[str, ...]] = {
+    "reach": ("reach", "touch", "contact"),
+    "push": ("push", "move", "shift"),
+    "grasp": ("grasp", "grip", "grab"),
+    "lift": ("lift", "raise", "hoist"),
+}
+
+
+@dataclass(frozen=True, order=True)
+class ObjectProps:
+    """What the instructor knows about one object on the table: its colour and its shape."""
+
+    colour: str
+    shape: str
+
+    def __post_init__(self) -> None:
+        if self.colour not in COLOURS:
+            raise ValueError(f"unknown colour {self.colour!r}; expected one of {', '.join(COLOURS)}")
+        if self.shape not in SHAPES:
+            raise ValueError(f"unknown shape {self.shape!r}; expected one of {', '.join(SHAPES)}")
+
+    def shared_properties(self, other: ObjectProps) -> int:
+        """How many properties (0, 1 or 2) this object has in common with ``other``."""
+        return int(self.colour == other.colour) + int(self.shape == other.shape)
+
+
+def check_task(task: str) -> str:
+    """Return ``task`` if it is a known task, else raise a ``ValueError`` that lists the known ones."""
+    if task not in TASKS:
+        raise ValueError(f"unknown task {task!r}; expected one of {', '.join(TASKS)}")
+    return task
