@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import sys
 from enum import Enum
+from pathlib import Path
 from typing import Annotated
 
 import numpy as np
@@ -22,6 +23,15 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
+
+
+err_console = Console(stderr=True)
+
+
+def fail(message: str, code: int = 2) -> typer.Exit:
+    """Print ``message`` as an error on stderr and return the exit to raise."""
+    err_console.print(f"[bold red]error:[/] {message}")
+    return typer.Exit(code)
 
 
 class TaskName(str, Enum):
@@ -124,3 +134,86 @@ def sample_instructions(
     for i, s in enumerate(sentences):
         table.add_row(str(i), s.instruction, s.correction or "", " ".join(map(str, vocab.encode(s.text))))
     console.print(table)
+
+
+class ModeName(str, Enum):
+    color = "color"
+    shape = "shape"
+    color_shape = "color_shape"
+
+
+class PolicyName(str, Enum):
+    oracle = "oracle"
+    mistaken = "mistaken"
+    random = "random"
+
+
+def _percent(rate: float) -> str:
+    return "-" if rate != rate else f"{100 * rate:5.1f}%"
+
+
+def _print_report(report: "EvaluationReport", title: str) -> None:  # noqa: F821
+    table = Table(title=title)
+    for column in ("episodes", "", "success", "95% CI"):
+        table.add_column(column, justify="right" if column != "" else "left")
+    rows = [("all episodes", report.overall), ("correction episodes", report.corrections)]
+    rows += [(f"  {kind}", rate) for kind, rate in report.by_kind().items()]
+    rows += [(f"  correction spoken, {name.replace('_', ' ')}", rate) for name, rate in report.by_negation().items()]
+    for name, rate in rows:
+        low, high = rate.interval
+        ci = "-" if not rate.episodes else f"[{100 * low:.1f}, {100 * high:.1f}]"
+        table.add_row(str(rate.episodes), name, _percent(rate.success), ci)
+    Console().print(table)
+    Console().print(f"mean episode length {report.mean_length:.1f} steps, mean return {report.mean_return:.1f}")
+
+
+@app.command("eval")
+def evaluate_command(
+    policy: Annotated[PolicyName, typer.Argument(help="Scripted policy to evaluate: oracle, mistaken or random.")],
+    task: Annotated[TaskName, typer.Option(help="Task to evaluate on.")] = TaskName.reach,
+    objects: Annotated[int, typer.Option(min=2, max=3, help="Objects on the table (2 or 3).")] = 2,
+    mode: Annotated[ModeName, typer.Option(help="Which properties vary between objects.")] = ModeName.color,
+    correction_rate: Annotated[
+        float, typer.Option(min=0.0, max=1.0, help="Share of correction episodes (0 = plain instructions).")
+    ] = 0.0,
+    negations: Annotated[bool, typer.Option("--negations", help="Allow negating corrections.")] = False,
+    max_delay: Annotated[int, typer.Option(min=0, help="Corrections arrive after 0..MAX_DELAY steps.")] = 0,
+    rare_words: Annotated[bool, typer.Option("--rare-words", help="Allow rare colour words (common ground).")] = False,
+    kinds: Annotated[
+        str | None,
+        typer.Option(help="Comma-separated kinds: ambiguity,common_ground,instruction_correction,wrong_object."),
+    ] = None,
+    episodes: Annotated[int, typer.Option(min=1, help="Number of episodes.")] = 100,
+    seed: Annotated[int, typer.Option(min=0, help="Episode i uses seed SEED + i.")] = 0,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
+    gif: Annotated[Path | None, typer.Option(help="Write the first episodes as an animated GIF here.")] = None,
+) -> None:
+    """Evaluate a policy: success overall, on correction episodes, per kind, with 95% intervals."""
+    from lanrocli.envs import LanroEnv
+    from lanrocli.envs.evaluation import evaluate
+    from lanrocli.envs.policies import make_policy
+
+    try:
+        env = LanroEnv(
+            task=task.value,
+            objects=objects,
+            mode=mode.value,
+            correction_rate=correction_rate,
+            negations=negations,
+            max_delay=max_delay,
+            rare_words=rare_words,
+            kinds=None if kinds is None else [k.strip() for k in kinds.split(",") if k.strip()],
+            render_mode="rgb_array" if gif else None,
+        )
+    except ValueError as error:
+        raise fail(f"{error} (see 'lanro eval --help')") from None
+    try:
+        report = evaluate(env, make_policy(policy.value, task.value), episodes, seed, gif)
+    finally:
+        env.close()
+    if as_json:
+        typer.echo(json.dumps({"policy": policy.value, "task": task.value, **report.as_dict()}))
+        return
+    _print_report(report, f"{policy.value} on {task.value}, {objects} objects, {mode.value}, seed {seed}")
+    if gif:
+        Console().print(f"wrote {gif}")

@@ -1,0 +1,222 @@
+"""``LanroEnv``: the Panda, a scene, a task and the instructor, as one gymnasium environment."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from lanrocli.envs.instructor import Instructor, InstructorSettings, Kind
+from lanrocli.envs.scene import Mode, Scene, sample_scene
+from lanrocli.envs.tasks import TaskView, make_task
+from lanrocli.language import COLOURS, SHAPES, grammar_vocabulary
+from lanrocli.sim import OBJECT_AREA, SHAPES as SIM_SHAPES, ObjectSet, Panda, World, resting_position
+
+ARM_SIZE = 7
+"""End-effector position (3), its linear velocity (3), finger width (1)."""
+
+OBJECT_SIZE = 3 + 4 + 3 + 3 + len(COLOURS) + len(SHAPES)
+"""Per object: position (3), quaternion x y z w (4), linear (3) and angular (3) velocity, one-hot colour and shape."""
+
+PLAIN_LIMIT = 50
+CORRECTION_LIMIT = 100
+MIN_SPACING_SIZES = 3.0
+"""Objects start at least this many object sizes apart."""
+
+IMAGE_SIZE = (480, 360)
+
+
+def observation_size(n_objects: int) -> int:
+    return ARM_SIZE + n_objects * OBJECT_SIZE
+
+
+class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
+    """A Panda on a table with 2 or 3 objects and an instructor that speaks, watches and corrects.
+
+    Observation ``{"observation": float32[N], "instruction": int64[L]}`` with N = 7 + 25 n:
+
+    - ``[0:3]`` end-effector position (m), ``[3:6]`` its velocity (m/s), ``[6]`` finger width (m);
+    - per object k (in the order of ``info["objects"]``), from ``7 + 25 k``: position (3), orientation
+      quaternion x y z w (4), linear velocity (3), angular velocity (3), one-hot colour (9, in the order of
+      ``lanrocli.language.COLOURS``), one-hot shape (3, ``cube cuboid cylinder``).
+
+    ``instruction`` is the current goal sentence (instruction, plus the correction from the step it is
+    spoken) in the grammar-wide vocabulary, padded with 0. Reward is 0 when the task holds for the goal
+    object, else -1; success ends the episode. ``info`` carries ``is_success``, ``achieved`` (per object),
+    ``goal_index``, ``object_positions``, ``objects``, ``instruction_text``, ``challenge`` (the
+    misunderstanding of a correction episode, or ``None``) and ``correction`` (``None`` until spoken).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
+
+    def __init__(
+        self,
+        task: str = "reach",
+        objects: int = 2,
+        mode: str = "color",
+        correction_rate: float = 0.0,
+        negations: bool = False,
+        max_delay: int = 0,
+        rare_words: bool = False,
+        kinds: Sequence[str] | None = None,
+        max_episode_steps: int | None = None,
+        render_mode: str | None = None,
+        gui: bool = False,
+    ) -> None:
+        if objects not in (2, 3):
+            raise ValueError(f"objects must be 2 or 3, got {objects!r}")
+        try:
+            self.mode = Mode(mode)
+        except ValueError:
+            raise ValueError(f"mode must be one of {[m.value for m in Mode]}, got {mode!r}") from None
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if max_episode_steps is not None and max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps must be positive, got {max_episode_steps}")
+        self.task = make_task(task)
+        self.settings = InstructorSettings(
+            correction_rate=correction_rate,
+            negations=negations,
+            max_delay=max_delay,
+            rare_words=rare_words,
+            kinds=tuple(Kind) if kinds is None else tuple(kinds),
+        )
+        self.n_objects = objects
+        self.render_mode = render_mode
+        self.max_episode_steps = max_episode_steps or (CORRECTION_LIMIT if correction_rate > 0 else PLAIN_LIMIT)
+        self.vocabulary = grammar_vocabulary()
+        n = observation_size(objects)
+        self.observation_space = gym.spaces.Dict(
+            {
+                "observation": gym.spaces.Box(-np.inf, np.inf, shape=(n,), dtype=np.float32),
+                "instruction": gym.spaces.Box(
+                    0, len(self.vocabulary) - 1, shape=(self.vocabulary.max_length,), dtype=np.int64
+                ),
+            }
+        )
+        action_size = 4 if self.task.gripper else 3
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(action_size,), dtype=np.float32)
+
+        self.world = World(gui=gui)
+        self.robot = Panda(self.world, gripper=self.task.gripper)
+        self.objects = ObjectSet(self.world)
+        self.instructor = Instructor(self.task.name, self.settings)
+        self._scene: Scene | None = None
+        self._start_positions = np.zeros((objects, 3))
+        self._heights = np.zeros(objects)
+        self._properties = np.zeros((objects, len(COLOURS) + len(SHAPES)), dtype=np.float32)
+        self._tokens = np.zeros(self.vocabulary.max_length, dtype=np.int64)
+        self._achieved = np.zeros(objects, dtype=bool)
+        self._steps = 0
+        self._area_low = np.array(OBJECT_AREA.low[:2])
+        self._area_high = np.array(OBJECT_AREA.high[:2])
+        self._spacing = MIN_SPACING_SIZES * 2 * max(max(s.half_extents[:2]) for s in SIM_SHAPES.values())
+
+    # -- episode ---------------------------------------------------------------------------------------
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        super().reset(seed=seed)
+        rng = self.np_random
+        challenge = self.instructor.draw_challenge(rng)
+        scene = sample_scene(
+            rng,
+            self.mode,
+            self.n_objects,
+            self._area_low,
+            self._area_high,
+            self._spacing,
+            need_shared=challenge is Kind.AMBIGUITY,
+        )
+        self._scene = scene
+        self.task.reset(rng)
+        self.objects.clear()
+        for obj, (x, y) in zip(scene.objects, scene.positions):
+            self.objects.spawn(obj.shape, obj.colour, resting_position(obj.shape, x, y))
+        self.robot.reset(finger_width=0.08 if self.task.gripper else 0.0)
+        self._start_positions = np.array(self.objects.states().positions)
+        self._heights = np.array([SIM_SHAPES[o.shape].height for o in scene.objects])
+        self._properties[:] = 0.0
+        for k, obj in enumerate(scene.objects):
+            self._properties[k, COLOURS.index(obj.colour)] = 1.0
+            self._properties[k, len(COLOURS) + SHAPES.index(obj.shape)] = 1.0
+        self.instructor.start(rng, scene, challenge)
+        self._tokens = self.vocabulary.encode(self.instructor.text)
+        self._steps = 0
+        self._achieved = self._evaluate()
+        return self._observation(), self._info()
+
+    def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        if self._scene is None:
+            raise RuntimeError("call reset() before step()")
+        self.robot.apply_action(np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0))
+        self.world.step()
+        self._steps += 1
+        self._achieved = self._evaluate()
+        # The instructor judges the state this step produced, so a correction is in this very observation.
+        if self.instructor.observe(self.np_random, self._steps, self._achieved):
+            self._tokens = self.vocabulary.encode(self.instructor.text)
+        success = bool(self._achieved[self._scene.goal_index])
+        truncated = not success and self._steps >= self.max_episode_steps
+        return self._observation(), 0.0 if success else -1.0, success, truncated, self._info()
+
+    # -- what the agent and the tools see --------------------------------------------------------------
+
+    def _evaluate(self) -> np.ndarray:
+        states = self.objects.states()
+        contacts = self.robot.contacts(self.objects.body_ids)
+        view = TaskView(
+            left_finger=contacts.left_finger,
+            right_finger=contacts.right_finger,
+            positions=states.positions,
+            start_positions=self._start_positions,
+            heights=self._heights,
+            ee_position=self.robot.state().ee_position,
+        )
+        return self.task.achieved(view)
+
+    def _observation(self) -> dict[str, np.ndarray]:
+        robot = self.robot.state()
+        states = self.objects.states()
+        per_object = np.concatenate(
+            [
+                states.positions,
+                states.orientations,
+                states.linear_velocities,
+                states.angular_velocities,
+                self._properties,
+            ],
+            axis=1,
+        )
+        observation = np.concatenate(
+            [robot.ee_position, robot.ee_velocity, [robot.finger_width], per_object.ravel()]
+        ).astype(np.float32)
+        return {"observation": observation, "instruction": self._tokens.copy()}
+
+    def _info(self) -> dict[str, Any]:
+        assert self._scene is not None
+        spoken = self.instructor.spoken
+        return {
+            "is_success": bool(self._achieved[self._scene.goal_index]),
+            "achieved": self._achieved.copy(),
+            "goal_index": self._scene.goal_index,
+            "object_positions": np.array(self.objects.states().positions),
+            "objects": tuple((o.colour, o.shape) for o in self._scene.objects),
+            "instruction_text": self.instructor.text,
+            "challenge": None if self.instructor.challenge is None else self.instructor.challenge.value,
+            "correction": None if spoken is None else spoken.as_info(),
+        }
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array":
+            return None
+        from lanrocli.envs.caption import caption
+
+        width, height = IMAGE_SIZE
+        return caption(self.world.render(width, height), self.instructor.text)
+
+    def close(self) -> None:
+        self.world.close()

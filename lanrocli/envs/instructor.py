@@ -1,0 +1,193 @@
+"""The synthetic instructor: speaks the episode's instruction, watches the arm, and corrects it once.
+
+In a correction episode the instructor sets up one of the paper's misunderstandings (or simply waits for
+the arm's own mistake). When the task condition holds for a non-goal object, it schedules a correction
+after a delay of 0..max_delay steps; the correction then extends the goal sentence (g_l o g_ac). The goal
+object never changes: reward is always for the object the instructor means, which is why achieving the
+wrongly named object in an instruction correction episode does not end the episode.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+from lanrocli.language import (
+    BEGINNING_WORDS,
+    TASK_VERBS,
+    Beginning,
+    ObjectProps,
+    Phrase,
+    ambiguous_phrases,
+    beginning_kinds,
+    check_task,
+    correction,
+    extend,
+    identifying_phrases,
+    instruction,
+    object_phrases,
+)
+from lanrocli.envs.scene import Scene
+
+
+class Kind(str, Enum):
+    """The misunderstanding a correction episode is built around."""
+
+    AMBIGUITY = "ambiguity"
+    COMMON_GROUND = "common_ground"
+    INSTRUCTION_CORRECTION = "instruction_correction"
+    WRONG_OBJECT = "wrong_object"
+
+
+@dataclass(frozen=True)
+class InstructorSettings:
+    """How often and how the instructor corrects; validated so a bad stage fails before any physics runs."""
+
+    correction_rate: float = 0.0
+    negations: bool = False
+    max_delay: int = 0
+    rare_words: bool = False
+    kinds: tuple[Kind, ...] = tuple(Kind)
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.correction_rate <= 1.0:
+            raise ValueError(f"correction_rate must be within [0, 1], got {self.correction_rate}")
+        if not isinstance(self.max_delay, (int, np.integer)) or self.max_delay < 0:
+            raise ValueError(f"max_delay must be a non-negative integer number of steps, got {self.max_delay!r}")
+        try:
+            kinds = tuple(Kind(k) for k in self.kinds)
+        except ValueError:
+            raise ValueError(
+                f"kinds must be a subset of {[k.value for k in Kind]}, got {list(self.kinds)}"
+            ) from None
+        if not kinds:
+            raise ValueError("kinds must name at least one kind of correction")
+        object.__setattr__(self, "kinds", kinds)
+        if self.correction_rate > 0 and not self.active_kinds:
+            raise ValueError("kinds=['common_ground'] needs rare_words=True: without rare words there is no such case")
+
+    @property
+    def active_kinds(self) -> tuple[Kind, ...]:
+        """The kinds this instructor can produce: common ground needs rare words to exist."""
+        return tuple(k for k in self.kinds if k is not Kind.COMMON_GROUND or self.rare_words)
+
+
+@dataclass(frozen=True)
+class Correction:
+    """A spoken correction, as reported in the environment's ``info``."""
+
+    kind: Kind
+    negation: bool
+    text: str
+    spoken_at: int
+    triggered_at: int
+
+    def as_info(self) -> dict[str, object]:
+        return {
+            "kind": self.kind.value,
+            "negation": self.negation,
+            "text": self.text,
+            "spoken_at": self.spoken_at,
+            "triggered_at": self.triggered_at,
+        }
+
+
+def _pick(rng: np.random.Generator, items: Sequence):  # type: ignore[no-untyped-def]
+    return items[int(rng.integers(len(items)))]
+
+
+def _matching(phrase: Phrase, objects: Sequence[ObjectProps]) -> set[int]:
+    return {i for i, o in enumerate(objects) if phrase.matches(o)}
+
+
+@dataclass
+class Instructor:
+    """One episode's dialogue. ``start`` plans it; ``observe`` is called after every step."""
+
+    task: str
+    settings: InstructorSettings
+    challenge: Kind | None = field(default=None, init=False)
+    instruction_text: str = field(default="", init=False)
+    spoken: Correction | None = field(default=None, init=False)
+    _scene: Scene | None = field(default=None, init=False)
+    _phrase: Phrase | None = field(default=None, init=False)
+    _delay: int = field(default=0, init=False)
+    _trigger: tuple[int, int] | None = field(default=None, init=False)  # (step, touched object)
+
+    def __post_init__(self) -> None:
+        check_task(self.task)
+
+    @property
+    def text(self) -> str:
+        """The current goal sentence: the instruction, extended by the correction once spoken."""
+        return extend(self.instruction_text, self.spoken.text if self.spoken else None)
+
+    def draw_challenge(self, rng: np.random.Generator) -> Kind | None:
+        """Whether the next episode is a correction episode, and of which kind (drawn before the scene)."""
+        if self.settings.correction_rate > 0 and rng.random() < self.settings.correction_rate:
+            return _pick(rng, self.settings.active_kinds)
+        return None
+
+    def start(self, rng: np.random.Generator, scene: Scene, challenge: Kind | None) -> None:
+        self._scene, self.challenge, self.spoken, self._trigger = scene, challenge, None, None
+        self._delay = int(rng.integers(self.settings.max_delay + 1))
+        goal, others = scene.goal, scene.others(scene.goal_index)
+        if challenge is Kind.AMBIGUITY:
+            phrases = ambiguous_phrases(goal, others)
+        elif challenge is Kind.COMMON_GROUND:
+            phrases = [p for p in identifying_phrases(goal, others, rare=True) if p.rare]
+        elif challenge is Kind.INSTRUCTION_CORRECTION:
+            named = _pick(rng, [i for i in range(len(scene.objects)) if i != scene.goal_index])
+            phrases = identifying_phrases(scene.objects[named], scene.others(named))
+        else:
+            phrases = identifying_phrases(goal, others)
+        if not phrases:
+            raise RuntimeError(f"no {challenge or 'plain'} instruction exists for goal {goal} among {others}")
+        self._phrase = _pick(rng, phrases)
+        self.instruction_text = instruction(_pick(rng, TASK_VERBS[self.task]), self._phrase)
+
+    def observe(self, rng: np.random.Generator, step: int, achieved: np.ndarray) -> bool:
+        """Watch the state after ``step``; return True when the goal sentence changed at this step."""
+        if self.challenge is None or self.spoken is not None or self._scene is None:
+            return False
+        if self._trigger is None:
+            wrong = np.flatnonzero(achieved)
+            wrong = wrong[wrong != self._scene.goal_index]
+            if wrong.size == 0:
+                return False
+            self._trigger = (step, int(_pick(rng, wrong)))
+        triggered_at, touched = self._trigger
+        if step < triggered_at + self._delay:
+            return False
+        self.spoken = self._correct(rng, step, triggered_at, touched)
+        return True
+
+    def _candidates(self) -> set[int]:
+        """The objects a listener who knows only the common words would still consider after the instruction."""
+        assert self._scene is not None and self._phrase is not None
+        everything = set(range(len(self._scene.objects)))
+        if self.challenge is Kind.INSTRUCTION_CORRECTION:
+            return everything  # the correction retracts the instruction's object
+        if self.challenge is Kind.COMMON_GROUND:
+            if self._phrase.shape is None:
+                return everything
+            return {i for i, o in enumerate(self._scene.objects) if o.shape == self._phrase.shape}
+        return _matching(self._phrase, self._scene.objects)
+
+    def _correct(self, rng: np.random.Generator, step: int, triggered_at: int, touched: int) -> Correction:
+        assert self._scene is not None and self.challenge is not None
+        objects, goal = self._scene.objects, self._scene.goal_index
+        candidates = self._candidates()
+        kind = _pick(rng, beginning_kinds(self.settings.negations))
+        if kind is Beginning.NEGATION:
+            negations = [p for p in object_phrases(objects[touched]) if candidates - _matching(p, objects) == {goal}]
+            if negations:
+                text = correction("not", _pick(rng, negations))
+                return Correction(self.challenge, True, text, step, triggered_at)
+            kind = _pick(rng, (Beginning.EXCUSE, Beginning.EDIT))
+        naming = [p for p in object_phrases(objects[goal]) if candidates & _matching(p, objects) == {goal}]
+        text = correction(_pick(rng, BEGINNING_WORDS[kind]), _pick(rng, naming))
+        return Correction(self.challenge, False, text, step, triggered_at)

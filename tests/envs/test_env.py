@@ -1,0 +1,197 @@
+"""The gymnasium environment: its contract with agents, evaluation and the instructor."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from lanrocli.envs import ENV_IDS, LanroEnv, observation_size
+from lanrocli.envs.policies import make_policy
+from lanrocli.language import all_corrections, all_instructions, grammar_vocabulary
+
+INFO_KEYS = {
+    "is_success",
+    "achieved",
+    "goal_index",
+    "object_positions",
+    "objects",
+    "instruction_text",
+    "challenge",
+    "correction",
+}
+
+
+def rollout(env: LanroEnv, policy_name: str, seed: int) -> list[tuple]:
+    """One episode as (observation, reward, terminated, truncated, info) tuples, reset included."""
+    policy = make_policy(policy_name, env.task.name)
+    obs, info = env.reset(seed=seed)
+    policy.reset(seed=seed)
+    steps = [(obs, 0.0, False, False, info)]
+    while True:
+        obs, reward, terminated, truncated, info = env.step(policy.act(obs, info))
+        steps.append((obs, reward, terminated, truncated, info))
+        if terminated or truncated:
+            return steps
+
+
+@pytest.fixture(scope="module")
+def correcting_env():
+    env = LanroEnv("reach", objects=3, mode="color_shape", correction_rate=1.0, negations=True, rare_words=True)
+    yield env
+    env.close()
+
+
+@pytest.mark.parametrize("env_id", list(ENV_IDS.values()))
+def test_check_env_passes(env_id: str) -> None:
+    env = gym.make(env_id, correction_rate=0.5, negations=True, rare_words=True, max_delay=3)
+    check_env(env.unwrapped, skip_render_check=True)
+    env.close()
+
+
+def test_spaces_and_layout() -> None:
+    env = LanroEnv("lift", objects=3, mode="shape")
+    obs, info = env.reset(seed=3)
+    assert env.action_space.shape == (4,)
+    assert obs["observation"].dtype == np.float32 and obs["observation"].shape == (observation_size(3),) == (82,)
+    assert obs["instruction"].dtype == np.int64 and obs["instruction"].shape == (grammar_vocabulary().max_length,)
+    assert env.observation_space.contains(obs)
+    assert set(info) == INFO_KEYS
+    o = obs["observation"]
+    np.testing.assert_allclose(o[7:10], info["object_positions"][0], atol=1e-6)
+    np.testing.assert_allclose(o[7 + 25 : 10 + 25], info["object_positions"][1], atol=1e-6)
+    colour, shape = info["objects"][2]
+    one_hot = o[7 + 50 + 13 : 7 + 75]
+    assert one_hot.sum() == 2 and one_hot[["red", "green", "blue"].index(colour)] == 1
+    assert one_hot[9 + ["cube", "cuboid", "cylinder"].index(shape)] == 1
+    assert env.max_episode_steps == 50
+    assert LanroEnv("reach", correction_rate=0.5).max_episode_steps == 100
+    assert LanroEnv("reach", correction_rate=0.5, max_episode_steps=7).max_episode_steps == 7
+    assert LanroEnv("push").action_space.shape == (3,)
+
+
+def test_same_seed_same_episodes(correcting_env: LanroEnv) -> None:
+    def summary(steps: list[tuple]) -> list:
+        return [
+            (info["objects"], info["instruction_text"], info["correction"], info["object_positions"].round(6).tolist())
+            for *_, info in steps
+        ]
+
+    for seed in range(3):
+        first = summary(rollout(correcting_env, "mistaken", seed))
+        second = summary(rollout(correcting_env, "mistaken", seed))
+        assert first == second
+    assert summary(rollout(correcting_env, "mistaken", 0)) != summary(rollout(correcting_env, "mistaken", 1))
+
+
+def test_reward_and_success_follow_achieved_goal(correcting_env: LanroEnv) -> None:
+    for seed in range(6):
+        steps = rollout(correcting_env, "mistaken" if seed % 2 else "random", seed)
+        for _, reward, terminated, truncated, info in steps[1:]:
+            achieved = bool(info["achieved"][info["goal_index"]])
+            assert info["is_success"] == achieved == terminated
+            assert reward == (0.0 if achieved else -1.0)
+            assert not (terminated and truncated)
+        assert steps[-1][2] or len(steps) - 1 == correcting_env.max_episode_steps
+
+
+def test_corrections_reach_the_observation_on_the_step_they_are_spoken(correcting_env: LanroEnv) -> None:
+    vocab = grammar_vocabulary()
+    instructions = {t for task in ("reach",) for t, _ in all_instructions(task, rare=True)}
+    corrections = {t for t, _ in all_corrections(negations=True)}
+    kinds, wrong_first_objects, negations = set(), set(), set()
+    for seed in range(40):
+        steps = rollout(correcting_env, "mistaken", seed)
+        spoken_step = None
+        for t, (obs, _, terminated, _, info) in enumerate(steps):
+            assert vocab.decode(obs["instruction"]) == info["instruction_text"]
+            correction = info["correction"]
+            if correction is not None and spoken_step is None:
+                spoken_step = t
+                assert correction["spoken_at"] == t
+                assert not terminated, "the episode must not end on the step a correction is spoken"
+                assert info["instruction_text"].endswith(" " + correction["text"])
+                assert correction["text"] in corrections
+                assert info["instruction_text"][: -len(correction["text"]) - 1] in instructions
+                kinds.add(correction["kind"])
+                negations.add(correction["negation"])
+                touched = np.flatnonzero(info["achieved"])
+                wrong_first_objects.update(int(k) for k in touched if k != info["goal_index"])
+        assert spoken_step is not None
+    assert kinds == {"ambiguity", "common_ground", "instruction_correction", "wrong_object"}
+    assert negations == {True, False}
+    assert 0 in wrong_first_objects, "work on the object with index 0 must be noticed"
+
+
+def test_delayed_corrections_arrive_within_max_delay() -> None:
+    env = LanroEnv("push", objects=2, correction_rate=1.0, max_delay=10, kinds=["wrong_object"])
+    waits = set()
+    for seed in range(12):
+        info = rollout(env, "mistaken", seed)[-1][-1]
+        correction = info["correction"]
+        assert correction is not None
+        wait = correction["spoken_at"] - correction["triggered_at"]
+        assert 0 <= wait <= 10
+        waits.add(wait)
+    assert len(waits) > 1
+    env.close()
+
+
+def test_two_environments_do_not_interfere() -> None:
+    alone = LanroEnv("push", objects=2)
+    reference = [s[-1]["object_positions"].tolist() for s in rollout(alone, "oracle", 5)]
+    alone.close()
+    first, second = LanroEnv("push", objects=2), LanroEnv("push", objects=3)
+    obs1, info1 = first.reset(seed=5)
+    second.reset(seed=9)
+    policy = make_policy("oracle", "push")
+    policy.reset(seed=5)
+    interleaved = [info1["object_positions"].tolist()]
+    for _ in range(len(reference) - 1):
+        obs1, _, _, _, info1 = first.step(policy.act(obs1, info1))
+        second.step(second.action_space.sample())
+        interleaved.append(info1["object_positions"].tolist())
+    assert interleaved == reference
+    first.close()
+    second.close()
+
+
+@pytest.mark.parametrize(
+    "kwargs, setting",
+    [
+        ({"objects": 9}, "objects"),
+        ({"mode": "weird"}, "mode"),
+        ({"correction_rate": 1.5}, "correction_rate"),
+        ({"task": "fly"}, "task"),
+        ({"max_delay": -2}, "max_delay"),
+        ({"kinds": ["gossip"]}, "kinds"),
+    ],
+)
+def test_bad_settings_raise_clear_errors(kwargs: dict, setting: str) -> None:
+    with pytest.raises(ValueError, match=setting):
+        LanroEnv(**kwargs)
+
+
+@pytest.mark.parametrize("task, threshold", [("reach", 0.95), ("push", 0.9), ("grasp", 0.85), ("lift", 0.8)])
+def test_oracle_solves_the_task(task: str, threshold: float) -> None:
+    env = LanroEnv(task, objects=2, mode="color_shape")
+    successes = [rollout(env, "oracle", seed)[-1][-1]["is_success"] for seed in range(12)]
+    assert np.mean(successes) >= threshold
+    env.close()
+
+
+def test_random_policy_rarely_succeeds() -> None:
+    env = LanroEnv("lift", objects=2)
+    successes = [rollout(env, "random", seed)[-1][-1]["is_success"] for seed in range(5)]
+    assert np.mean(successes) < 0.5
+    env.close()
+
+
+def test_render_returns_a_captioned_image() -> None:
+    env = LanroEnv("reach", render_mode="rgb_array")
+    env.reset(seed=0)
+    image = env.render()
+    assert image is not None and image.dtype == np.uint8 and image.shape == (360, 480, 3)
+    assert image[:20].mean() < image[100:].mean()  # the dark caption band
+    env.close()

@@ -1,0 +1,170 @@
+"""The instructor's dialogue logic, checked without physics: achieved flags are scripted."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lanrocli.envs.instructor import Instructor, InstructorSettings, Kind
+from lanrocli.envs.scene import Mode, Scene, sample_objects
+from lanrocli.language import (
+    BEGINNING_WORDS,
+    RARE_COLOUR_WORDS,
+    TASK_VERBS,
+    ObjectProps,
+    all_corrections,
+    all_instructions,
+    grammar_vocabulary,
+)
+
+INSTRUCTIONS = {t for task in TASK_VERBS for t, _ in all_instructions(task, rare=True)}
+CORRECTIONS = {t for t, _ in all_corrections(negations=True)}
+COLOUR_OF_WORD = {w: c for c, w in RARE_COLOUR_WORDS.items()}
+
+
+def parse_object(words: list[str]) -> tuple[str | None, str | None]:
+    """(colour, shape) named by an OBJECT phrase's two words; an independent reading of the grammar."""
+    from lanrocli.language import COLOURS, SHAPE_WORDS
+
+    shape_of = {w: s for s, ws in SHAPE_WORDS.items() for w in ws}
+    first, second = words
+    colour = first if first in COLOURS else COLOUR_OF_WORD.get(first)
+    shape = shape_of.get(second) or shape_of.get(first)
+    return colour, shape
+
+
+def fits(named: tuple[str | None, str | None], obj: ObjectProps) -> bool:
+    return (named[0] is None or named[0] == obj.colour) and (named[1] is None or named[1] == obj.shape)
+
+
+def run_episode(seed: int, kind: Kind, negations: bool, delay: int, n_objects: int = 3, mode: Mode = Mode.COLOR_SHAPE):
+    rng = np.random.default_rng(seed)
+    settings = InstructorSettings(correction_rate=1.0, negations=negations, max_delay=delay, rare_words=True, kinds=(kind,))
+    instructor = Instructor("push", settings)
+    objects, goal = sample_objects(rng, mode, n_objects, need_shared=kind is Kind.AMBIGUITY)
+    scene = Scene(objects, goal, np.zeros((n_objects, 2)))
+    challenge = instructor.draw_challenge(rng)
+    assert challenge is kind
+    instructor.start(rng, scene, challenge)
+    first_text = instructor.text
+    wrong = int(rng.choice([i for i in range(n_objects) if i != goal]))
+    achieved = np.zeros(n_objects, dtype=bool)
+    changed_at = None
+    for step in range(1, 60):
+        if step >= 5:
+            achieved[wrong] = True
+        if instructor.observe(rng, step, achieved):
+            assert changed_at is None, "a second correction was spoken"
+            changed_at = step
+    return instructor, scene, wrong, first_text, changed_at
+
+
+@pytest.mark.parametrize("kind", list(Kind))
+@pytest.mark.parametrize("negations", [False, True])
+@pytest.mark.parametrize("n_objects", [2, 3])
+def test_corrections_are_grammatical_and_name_the_right_object(kind: Kind, negations: bool, n_objects: int) -> None:
+    saw_negation = False
+    for seed in range(150):
+        instructor, scene, wrong, first_text, changed_at = run_episode(seed, kind, negations, 0, n_objects)
+        spoken = instructor.spoken
+        assert spoken is not None and spoken.kind is kind and changed_at == 5 == spoken.spoken_at
+        assert first_text in INSTRUCTIONS and spoken.text in CORRECTIONS
+        assert instructor.text == f"{first_text} {spoken.text}"
+        words = spoken.text.split()
+        named = parse_object(words[-2:])
+        if spoken.negation:
+            saw_negation = True
+            assert words[0] == "not" and fits(named, scene.objects[wrong])
+        else:
+            assert fits(named, scene.goal)
+        # The instruction plus the correction leave exactly the goal for a listener with common words.
+        instr_named = parse_object(first_text.split()[-2:])
+        rare_used = first_text.split()[-2] in COLOUR_OF_WORD
+        if kind is Kind.INSTRUCTION_CORRECTION:
+            candidates = set(range(len(scene.objects)))
+        else:
+            known = (None if rare_used else instr_named[0], instr_named[1])
+            candidates = {i for i, o in enumerate(scene.objects) if fits(known, o)}
+        if spoken.negation:
+            remaining = {i for i in candidates if not fits(named, scene.objects[i])}
+        else:
+            remaining = {i for i in candidates if fits(named, scene.objects[i])}
+        assert remaining == {scene.goal_index}
+    if negations and n_objects == 2:
+        assert saw_negation
+
+
+def test_instruction_matches_the_episode_kind() -> None:
+    for seed in range(200):
+        for kind in Kind:
+            instructor, scene, _, first_text, _ = run_episode(seed, kind, False, 0)
+            named = parse_object(first_text.split()[-2:])
+            matching = {i for i, o in enumerate(scene.objects) if fits(named, o)}
+            if kind is Kind.AMBIGUITY:
+                assert scene.goal_index in matching and len(matching) >= 2
+            elif kind is Kind.INSTRUCTION_CORRECTION:
+                assert len(matching) == 1 and scene.goal_index not in matching
+            else:
+                assert matching == {scene.goal_index}
+            assert (first_text.split()[-2] in COLOUR_OF_WORD) == (kind is Kind.COMMON_GROUND)
+
+
+@pytest.mark.parametrize("delay", [1, 7, 20])
+def test_delayed_corrections_arrive_within_max_delay(delay: int) -> None:
+    delays = set()
+    for seed in range(200):
+        instructor, *_, changed_at = run_episode(seed, Kind.WRONG_OBJECT, True, delay)
+        assert instructor.spoken is not None
+        waited = instructor.spoken.spoken_at - instructor.spoken.triggered_at
+        assert changed_at == instructor.spoken.spoken_at and 0 <= waited <= delay
+        delays.add(waited)
+    assert len(delays) > 1
+
+
+def test_plain_episodes_never_correct() -> None:
+    rng = np.random.default_rng(0)
+    instructor = Instructor("reach", InstructorSettings())
+    objects, goal = sample_objects(rng, Mode.COLOR, 3)
+    instructor.start(rng, Scene(objects, goal, np.zeros((3, 2))), instructor.draw_challenge(rng))
+    assert instructor.challenge is None
+    assert not instructor.observe(rng, 1, np.ones(3, dtype=bool))
+    assert instructor.spoken is None
+
+
+def test_correction_rate_sets_the_share_of_correction_episodes() -> None:
+    rng = np.random.default_rng(0)
+    instructor = Instructor("reach", InstructorSettings(correction_rate=0.5))
+    share = np.mean([instructor.draw_challenge(rng) is not None for _ in range(4000)])
+    assert 0.47 < share < 0.53
+
+
+def test_sentences_fit_the_vocabulary() -> None:
+    vocab = grammar_vocabulary()
+    for seed in range(50):
+        instructor, *_ = run_episode(seed, Kind.COMMON_GROUND, True, 0)
+        assert vocab.decode(vocab.encode(instructor.text)) == instructor.text
+
+
+@pytest.mark.parametrize(
+    "kwargs, setting",
+    [
+        ({"correction_rate": 1.5}, "correction_rate"),
+        ({"max_delay": -1}, "max_delay"),
+        ({"kinds": ("telepathy",)}, "kinds"),
+        ({"kinds": ()}, "kinds"),
+        ({"correction_rate": 0.5, "kinds": ("common_ground",)}, "rare_words"),
+    ],
+)
+def test_bad_settings_name_the_setting(kwargs: dict, setting: str) -> None:
+    with pytest.raises(ValueError, match=setting):
+        InstructorSettings(**kwargs)
+
+
+def test_beginnings_are_used() -> None:
+    starts = set()
+    for seed in range(300):
+        instructor, *_ = run_episode(seed, Kind.AMBIGUITY, True, 0, n_objects=2)
+        assert instructor.spoken is not None
+        text = instructor.spoken.text
+        starts.add(next(b for words in BEGINNING_WORDS.values() for b in words if text.startswith(b + " ")))
+    assert starts == {b for words in BEGINNING_WORDS.values() for b in words}
