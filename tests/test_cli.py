@@ -83,3 +83,35 @@ def test_negative_n_is_a_clear_error() -> None:
 def test_negations_without_corrections_is_refused() -> None:
     result = runner.invoke(app, ["sample-instructions", "--negations"])
     assert result.exit_code == 2 and "--corrections" in result.output
+
+
+def test_eval_json_is_clean_on_the_real_stdout() -> None:
+    """PyBullet's native code prints on fd 1; the JSON output must still parse."""
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-c", "from lanrocli.cli import app; app()", "eval", "oracle", "--episodes", "2", "--json"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    report = json.loads(out.stdout)
+    assert report["episodes"] == 2 and report["policy"] == "oracle"
+
+
+def test_eval_table_and_bad_values() -> None:
+    result = runner.invoke(app, ["eval", "random", "--task", "push", "--episodes", "2", "--correction-rate", "0.5"])
+    assert result.exit_code == 0 and "correction episodes" in result.output
+    bad = runner.invoke(app, ["eval", "oracle", "--correction-rate", "1.5"])
+    assert bad.exit_code == 2 and "--correction-rate" in bad.output
+    bad = runner.invoke(app, ["eval", "oracle", "--correction-rate", "0.5", "--kinds", "gossip"])
+    assert bad.exit_code == 2
+    bad = runner.invoke(app, ["eval", "telepath"])
+    assert bad.exit_code == 2
+
+
+def test_eval_writes_a_gif(tmp_path) -> None:
+    gif = tmp_path / "episodes.gif"
+    result = runner.invoke(app, ["eval", "oracle", "--episodes", "1", "--gif", str(gif)])
+    assert result.exit_code == 0 and gif.stat().st_size > 1000

@@ -1,0 +1,246 @@
+"""The Franka Panda arm, driven by end-effector displacements.
+
+An action moves the end-effector point (between the fingertips) by up to ``MAX_STEP`` per
+axis and control step, measured from where the end effector is now; inverse kinematics
+turns the target into arm joint positions, keeping the gripper pointing straight down with
+the fingers opening along the world y axis.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pybullet
+
+from lanrocli.sim.kinematics import ArmIK
+from lanrocli.sim.layout import ROBOT_BASE, WORKSPACE
+from lanrocli.sim.world import World
+
+URDF = "franka_panda/panda.urdf"
+
+ARM_JOINTS: tuple[int, ...] = (0, 1, 2, 3, 4, 5, 6)
+FINGER_JOINTS: tuple[int, int] = (9, 10)
+CONTROLLED_JOINTS: tuple[int, ...] = ARM_JOINTS + FINGER_JOINTS
+"""All movable joints, in the order PyBullet's kinematics functions expect them."""
+
+HAND_LINK = 8
+LEFT_FINGER_LINK = 9
+"""Finger on the world -y side when the gripper points down."""
+RIGHT_FINGER_LINK = 10
+"""Finger on the world +y side when the gripper points down."""
+EE_LINK = 11
+"""``panda_grasptarget``: the point between the fingertip pads, 1.1 cm above their tips."""
+
+NEUTRAL_ARM: tuple[float, ...] = (0.0, 0.0444, 0.0, -2.3739, 0.0, 2.4182, 0.7854)
+"""Arm joint angles (rad) that put the end effector at about (0, 0, 0.20), pointing down."""
+
+DOWN: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+"""End-effector orientation (x y z w): rotated by pi about x, so its z axis points down."""
+
+ARM_FORCE = 300.0
+"""Torque limit (N m) of each arm joint.
+
+Above the real Panda's limits on purpose: with 87/12 N m the wrist saturates when a 4 cm
+step is commanded, and the end effector then sags by centimetres instead of moving
+straight.
+"""
+
+FINGER_FORCE = 20.0
+"""Force limit per finger (N); with friction 1.0 it holds a 0.1 kg object many times over."""
+
+POSITION_GAIN = 0.15
+"""Gain of PyBullet's joint position control: a full action then moves the end effector
+about 3.7 cm per step in a straight line; higher gains overshoot and oscillate."""
+
+MAX_STEP = 0.04
+"""Largest end-effector displacement per control step (m) along each axis."""
+
+MAX_FINGER_WIDTH = 0.08
+"""Distance between the finger joints when fully open (m); the pads are then 7.1 cm apart."""
+
+FINGER_FRICTION = 1.0
+
+
+@dataclass(frozen=True)
+class RobotState:
+    """Robot state in the world frame; arrays are read-only.
+
+    ee_position (3,) m and ee_velocity (3,) m/s of the end-effector point; finger_width m
+    (distance between the finger joints: 0 closed, 0.08 fully open); joint_positions (9,)
+    rad for the seven arm joints then m for the two fingers.
+    """
+
+    ee_position: npt.NDArray[np.float64]
+    ee_velocity: npt.NDArray[np.float64]
+    finger_width: float
+    joint_positions: npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Contacts:
+    """Which robot parts touch each queried body; boolean arrays aligned with the query."""
+
+    left_finger: npt.NDArray[np.bool_]
+    right_finger: npt.NDArray[np.bool_]
+    hand: npt.NDArray[np.bool_]
+    """The hand or either finger (the gripper as a whole)."""
+    robot: npt.NDArray[np.bool_]
+    """Any link of the robot, arm included."""
+
+
+def _read_only(array: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    array.flags.writeable = False
+    return array
+
+
+class Panda:
+    """A fixed-base Panda on the table, controlled by Cartesian end-effector steps.
+
+    With ``gripper=False`` actions have three entries (dx, dy, dz) and the fingers are held
+    closed; with ``gripper=True`` a fourth entry in [-1, 1] sets the finger opening from
+    closed (-1) to fully open (+1).
+    """
+
+    def __init__(self, world: World, gripper: bool = False) -> None:
+        self._world = world
+        self._gripper = gripper
+        client = world.client
+        self._client = client
+        self.body_id = int(
+            client.loadURDF(
+                URDF,
+                basePosition=ROBOT_BASE,
+                useFixedBase=True,
+                flags=pybullet.URDF_ENABLE_CACHED_GRAPHICS_SHAPES,
+            )
+        )
+        arm_infos = [client.getJointInfo(self.body_id, j) for j in ARM_JOINTS]
+        self._ik = ArmIK(
+            client,
+            self.body_id,
+            EE_LINK,
+            DOWN,
+            num_arm_joints=len(ARM_JOINTS),
+            num_dofs=len(CONTROLLED_JOINTS),
+            rest=NEUTRAL_ARM,
+            lower=[info[8] for info in arm_infos],
+            upper=[info[9] for info in arm_infos],
+        )
+        scale = world.motor_force_scale
+        self._forces = [ARM_FORCE * scale] * len(ARM_JOINTS) + [FINGER_FORCE * scale] * 2
+        self._gains = [POSITION_GAIN] * len(CONTROLLED_JOINTS)
+        for finger in FINGER_JOINTS:
+            client.changeDynamics(self.body_id, finger, lateralFriction=FINGER_FRICTION)
+        self._get_link_state = client.getLinkState
+        self._get_joint_states = client.getJointStates
+        self._set_motors = client.setJointMotorControlArray
+        self._get_contacts = client.getContactPoints
+        self._finger_target = 0.0
+        self._cache_revision = -1
+        self._cache: RobotState | None = None
+        self.reset()
+
+    @property
+    def gripper(self) -> bool:
+        return self._gripper
+
+    @property
+    def action_size(self) -> int:
+        """Length of the action vector: 3, or 4 with the gripper."""
+        return 4 if self._gripper else 3
+
+    def reset(self, finger_width: float = 0.0) -> None:
+        """Put the arm in the neutral pose at rest, fingers at ``finger_width`` (m).
+
+        Without the gripper the fingers always reset closed.
+        """
+        width = float(np.clip(finger_width, 0.0, MAX_FINGER_WIDTH)) if self._gripper else 0.0
+        self._finger_target = width / 2.0
+        positions = [*NEUTRAL_ARM, self._finger_target, self._finger_target]
+        for joint, angle in zip(CONTROLLED_JOINTS, positions, strict=True):
+            self._client.resetJointState(self.body_id, joint, angle, 0.0)
+        self._command(positions)
+        self._world.invalidate()
+
+    def _command(self, positions: Sequence[float]) -> None:
+        self._set_motors(
+            self.body_id,
+            CONTROLLED_JOINTS,
+            pybullet.POSITION_CONTROL,
+            targetPositions=positions,
+            forces=self._forces,
+            positionGains=self._gains,
+        )
+
+    def ee_target(self, action: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """End-effector target (m, world frame) that ``action`` asks for from here."""
+        move = np.clip(np.asarray(action, dtype=np.float64)[:3], -1.0, 1.0) * MAX_STEP
+        return WORKSPACE.clip(self.state().ee_position + move)
+
+    def apply_action(self, action: npt.ArrayLike) -> None:
+        """Set joint targets for one control step; the world's ``step`` then moves the arm.
+
+        ``action[:3]`` in [-1, 1] (clipped) moves the end effector by up to ``MAX_STEP``
+        per axis, with the target clipped to ``WORKSPACE``; ``action[3]`` (gripper only)
+        maps [-1, 1] to finger widths [0, ``MAX_FINGER_WIDTH``].
+        """
+        values = np.asarray(action, dtype=np.float64).reshape(-1)
+        if values.shape[0] != self.action_size:
+            raise ValueError(
+                f"expected an action of size {self.action_size}, got {values.shape[0]}"
+            )
+        if not np.isfinite(values).all():
+            raise ValueError(f"action must be finite, got {values}")
+        if self._gripper:
+            opening = (min(max(float(values[3]), -1.0), 1.0) + 1.0) / 2.0
+            self._finger_target = opening * MAX_FINGER_WIDTH / 2.0
+        self._move(self.ee_target(values))
+
+    def _move(self, target: npt.NDArray[np.float64]) -> None:
+        joints = self.state().joint_positions
+        positions = self._ik.solve(target.tolist(), joints.tolist()).tolist()
+        positions.append(self._finger_target)
+        positions.append(self._finger_target)
+        self._command(positions)
+
+    def state(self) -> RobotState:
+        """End-effector and joint state, re-read from PyBullet only after the world changed."""
+        revision = self._world.revision
+        if self._cache is not None and self._cache_revision == revision:
+            return self._cache
+        link = self._get_link_state(self.body_id, EE_LINK, computeLinkVelocity=1)
+        joints = self._get_joint_states(self.body_id, CONTROLLED_JOINTS)
+        positions = np.array([joint[0] for joint in joints], dtype=np.float64)
+        self._cache = RobotState(
+            ee_position=_read_only(np.array(link[4], dtype=np.float64)),
+            ee_velocity=_read_only(np.array(link[6], dtype=np.float64)),
+            finger_width=float(positions[-2] + positions[-1]),
+            joint_positions=_read_only(positions),
+        )
+        self._cache_revision = revision
+        return self._cache
+
+    def contacts(self, body_ids: Sequence[int]) -> Contacts:
+        """Which parts of the robot touch each body in ``body_ids`` after the last step."""
+        index = {body: i for i, body in enumerate(body_ids)}
+        n = len(body_ids)
+        left = np.zeros(n, dtype=bool)
+        right = np.zeros(n, dtype=bool)
+        hand = np.zeros(n, dtype=bool)
+        robot = np.zeros(n, dtype=bool)
+        for point in self._get_contacts(bodyA=self.body_id):
+            i = index.get(point[2])
+            if i is None:
+                continue
+            link = point[3]
+            robot[i] = True
+            if link >= HAND_LINK:
+                hand[i] = True
+            if link == LEFT_FINGER_LINK:
+                left[i] = True
+            elif link == RIGHT_FINGER_LINK:
+                right[i] = True
+        return Contacts(left_finger=left, right_finger=right, hand=hand, robot=robot)

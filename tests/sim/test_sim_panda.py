@@ -1,0 +1,140 @@
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from lanrocli.sim import CONTROL_DT, MAX_FINGER_WIDTH, WORKSPACE, Panda, World
+
+
+def test_reset_puts_end_effector_above_the_table_centre(panda: Panda) -> None:
+    state = panda.state()
+    np.testing.assert_allclose(state.ee_position, [0.0, 0.0, 0.2], atol=0.002)
+    np.testing.assert_allclose(state.ee_velocity, 0.0, atol=1e-9)
+    assert state.finger_width == pytest.approx(0.0)
+    assert state.joint_positions.shape == (9,)
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2])
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_full_action_moves_about_four_centimetres_per_step(
+    world: World, panda: Panda, drive_to: Callable[..., int], axis: int, sign: float
+) -> None:
+    drive_to(world, panda, [0.0, 0.0, 0.16])
+    action = np.zeros(3)
+    action[axis] = sign
+    for _ in range(2):
+        panda.apply_action(action)
+        world.step()
+    before = panda.state().ee_position.copy()
+    panda.apply_action(action)
+    world.step()
+    moved = panda.state().ee_position - before
+    assert sign * moved[axis] == pytest.approx(0.04, abs=0.005)
+    others = np.delete(moved, axis)
+    assert np.all(np.abs(others) < 0.003)
+
+
+def test_actions_are_clipped_to_one_step(world: World, panda: Panda) -> None:
+    for _ in range(3):
+        panda.apply_action([10.0, 0.0, 0.0])
+        world.step()
+    velocity = panda.state().ee_velocity
+    assert velocity[0] < 0.045 / CONTROL_DT
+
+
+def test_zero_action_holds_position(world: World, panda: Panda) -> None:
+    for _ in range(3):
+        panda.apply_action([0.5, -0.5, -0.5])
+        world.step()
+    for _ in range(3):
+        panda.apply_action([0.0, 0.0, 0.0])
+        world.step()
+    before = panda.state().ee_position.copy()
+    for _ in range(5):
+        panda.apply_action([0.0, 0.0, 0.0])
+        world.step()
+    np.testing.assert_allclose(panda.state().ee_position, before, atol=0.001)
+
+
+def test_end_effector_stays_in_workspace_under_random_actions(
+    world: World, gripper_panda: Panda
+) -> None:
+    rng = np.random.default_rng(0)
+    for step in range(300):
+        if step % 100 == 0:
+            gripper_panda.reset()
+        if step % 8 == 0:
+            action = np.sign(rng.uniform(-1.0, 1.0, size=4))
+        gripper_panda.apply_action(action)
+        world.step()
+        assert WORKSPACE.contains(gripper_panda.state().ee_position, tolerance=0.01)
+
+
+def test_end_effector_reaches_workspace_corners(
+    world: World, panda: Panda, drive_to: Callable[..., int]
+) -> None:
+    for corner in ([0.2, 0.2, 0.02], [0.2, -0.2, 0.28], [-0.2, 0.2, 0.28], [-0.2, -0.2, 0.02]):
+        panda.reset()
+        steps = drive_to(world, panda, corner, tolerance=0.005)
+        assert steps < 40, corner
+
+
+def test_gripper_opens_and_closes(world: World, gripper_panda: Panda) -> None:
+    for _ in range(5):
+        gripper_panda.apply_action([0.0, 0.0, 0.0, 1.0])
+        world.step()
+    assert gripper_panda.state().finger_width == pytest.approx(MAX_FINGER_WIDTH, abs=0.003)
+    for _ in range(5):
+        gripper_panda.apply_action([0.0, 0.0, 0.0, -1.0])
+        world.step()
+    assert gripper_panda.state().finger_width == pytest.approx(0.0, abs=0.003)
+    for _ in range(5):
+        gripper_panda.apply_action([0.0, 0.0, 0.0, 0.0])
+        world.step()
+    assert gripper_panda.state().finger_width == pytest.approx(MAX_FINGER_WIDTH / 2, abs=0.003)
+
+
+def test_without_gripper_fingers_stay_closed(world: World, panda: Panda) -> None:
+    assert panda.action_size == 3
+    panda.reset(finger_width=0.08)
+    for _ in range(5):
+        panda.apply_action([0.3, 0.3, -0.3])
+        world.step()
+    assert panda.state().finger_width == pytest.approx(0.0, abs=0.001)
+
+
+def test_action_of_wrong_size_is_rejected(panda: Panda, gripper_panda: Panda) -> None:
+    with pytest.raises(ValueError):
+        panda.apply_action([0.0, 0.0, 0.0, 1.0])
+    with pytest.raises(ValueError):
+        gripper_panda.apply_action([0.0, 0.0, 0.0])
+
+
+def test_velocity_is_measured_in_the_direction_of_motion(world: World, panda: Panda) -> None:
+    for _ in range(3):
+        panda.apply_action([0.0, 1.0, 0.0])
+        world.step()
+    velocity = panda.state().ee_velocity
+    assert 0.0 < velocity[1] < 0.04 / CONTROL_DT
+    assert np.all(np.abs(velocity[[0, 2]]) < 0.5 * velocity[1])
+
+
+def test_state_is_cached_until_the_world_changes(world: World, panda: Panda) -> None:
+    first = panda.state()
+    assert panda.state() is first
+    with pytest.raises(ValueError):
+        first.ee_position[0] = 1.0
+    world.step()
+    assert panda.state() is not first
+
+
+def test_reset_restores_neutral_pose(world: World, panda: Panda) -> None:
+    neutral = panda.state().ee_position.copy()
+    for _ in range(5):
+        panda.apply_action([1.0, 1.0, -1.0])
+        world.step()
+    panda.reset()
+    np.testing.assert_allclose(panda.state().ee_position, neutral, atol=1e-9)
+    np.testing.assert_allclose(panda.state().ee_velocity, 0.0, atol=1e-9)
