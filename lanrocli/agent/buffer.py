@@ -1,0 +1,364 @@
+"""The replay buffer: whole episodes in flat preallocated arrays, sampled with hindsight language relabelling.
+
+Transitions live in a ring of ``capacity`` slots. An episode always occupies consecutive slots; when it
+does not fit before the end of the ring, writing wraps to slot 0 and the unused tail is retired. Writing
+over any slot of an older episode retires that whole episode, so a sample never mixes an episode with the
+one that half overwrote it: relabelling looks ahead within the episode, which would otherwise read another
+episode's future.
+
+Relabelling works on the sampled copies, never on the stored arrays. For each episode the buffer keeps, per
+slot, where the episode starts and how long it is, which later steps achieved the task on an object that a
+sentence can single out, and a small pool of such sentences per object (see :mod:`lanrocli.agent.relabel`).
+Sampling then needs only vectorised indexing.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lanrocli.agent.relabel import sentence_pool
+from lanrocli.language import COLOURS, SHAPES, TASKS, ObjectProps, Vocabulary, check_task, grammar_vocabulary
+
+# Eq. 1 of the paper: 0 when the task condition holds for the goal object, -1 otherwise.
+SUCCESS_REWARD = 0.0
+FAILURE_REWARD = -1.0
+
+NO_OBJECT = np.iinfo(np.uint8).max
+"""Property index stored for an object slot that the episode's scene leaves empty."""
+
+_FORMAT = 1
+
+
+@dataclass
+class EpisodeData:
+    """One complete (or truncated) episode of T steps, as the training loop collected it.
+
+    ``instructions[t]`` is the goal sentence read with ``observations[t]`` and ``next_instructions[t]``
+    the one read with ``next_observations[t]``; they differ at the step a correction is spoken.
+    ``achieved[t, k]``: the task condition holds for object k after step t (the environment's
+    ``info["achieved"]``). ``terminated[t]``: step t ended the episode by success (not by the time limit).
+    ``objects`` are in observation order, as ``info["objects"]`` lists them.
+    """
+
+    observations: np.ndarray  # float32 [T, N]
+    next_observations: np.ndarray  # float32 [T, N]
+    instructions: np.ndarray  # int [T, L]
+    next_instructions: np.ndarray  # int [T, L]
+    actions: np.ndarray  # float32 [T, A]
+    rewards: np.ndarray  # float32 [T]
+    terminated: np.ndarray  # bool [T]
+    achieved: np.ndarray  # bool [T, n_objects]
+    goal_index: int
+    objects: Sequence[ObjectProps] | Sequence[tuple[str, str]]
+    task: str
+
+    def __len__(self) -> int:
+        return int(self.observations.shape[0])
+
+
+@dataclass
+class Batch:
+    """Sampled transitions, relabelled where ``relabelled`` is true. ``done``: the step ended by success.
+    ``slots``: where in the buffer each transition is stored, to look up what the batch does not carry."""
+
+    obs: np.ndarray  # float32 [B, N]
+    instruction: np.ndarray  # int64 [B, L]
+    action: np.ndarray  # float32 [B, A]
+    reward: np.ndarray  # float32 [B]
+    next_obs: np.ndarray  # float32 [B, N]
+    next_instruction: np.ndarray  # int64 [B, L]
+    done: np.ndarray  # bool [B]
+    relabelled: np.ndarray  # bool [B]
+    slots: np.ndarray  # int64 [B]
+
+
+# The stored arrays: name -> (dtype, shape after the slot axis, in terms of the buffer's dimensions).
+def _layout(obs_dim: int, action_dim: int, max_objects: int, length: int) -> dict[str, tuple[type, tuple[int, ...]]]:
+    return {
+        "obs": (np.float32, (obs_dim,)),
+        "next_obs": (np.float32, (obs_dim,)),
+        "action": (np.float32, (action_dim,)),
+        "reward": (np.float32, ()),
+        "terminated": (np.bool_, ()),
+        "instruction": (np.uint8, (length,)),
+        "next_instruction": (np.uint8, (length,)),
+        "achieved": (np.bool_, (max_objects,)),
+        "goal_index": (np.uint8, ()),
+        "objects": (np.uint8, (max_objects, 2)),
+        "task": (np.uint8, ()),
+        "episode_start": (np.int32, ()),
+        "episode_length": (np.int32, ()),
+        # Relabelling: the achieving steps of an episode are listed (as slots) in the episode's own slots;
+        # for step t, future_first/future_count select those at or after t.
+        "achieving_slot": (np.int32, ()),
+        "future_first": (np.int32, ()),
+        "future_count": (np.int32, ()),
+        "identifiable": (np.bool_, (max_objects,)),
+        "plain_pool": (np.uint8, (max_objects, length)),
+        "corrected_pool": (np.uint8, (max_objects, length)),
+        "valid": (np.bool_, ()),
+    }
+
+
+class ReplayBuffer:
+    """Episodes in a ring of ``capacity`` transitions, with hindsight language relabelling.
+
+    ``pool_rows``: relabelling sentences drawn per object and style when an episode is added (fewer for
+    episodes shorter than that, as the pool is stored in the episode's own slots). ``negations``: whether
+    corrected relabelling sentences may use ``not``. ``seed`` drives those draws; the generator's state is
+    saved with the buffer so a resumed run draws the same sentences.
+
+    The arrays are allocated with ``np.zeros``, which the operating system backs with memory only as slots
+    are first written, so a large capacity costs little until it fills.
+    """
+
+    def __init__(
+        self,
+        capacity: int,
+        obs_dim: int,
+        action_dim: int,
+        max_objects: int = 3,
+        vocabulary: Vocabulary | None = None,
+        pool_rows: int = 16,
+        negations: bool = True,
+        seed: int = 0,
+    ) -> None:
+        vocabulary = vocabulary if vocabulary is not None else grammar_vocabulary()
+        if len(vocabulary) > np.iinfo(np.uint8).max + 1:
+            raise ValueError(f"a vocabulary of {len(vocabulary)} words does not fit the buffer's uint8 token ids")
+        if not 1 <= capacity < 2**31 or pool_rows < 1 or max_objects < 1:
+            raise ValueError("capacity (below 2**31, slots are int32), pool_rows and max_objects must be positive")
+        self.capacity = capacity
+        self.obs_dim = obs_dim
+        self.action_dim = action_dim
+        self.max_objects = max_objects
+        self.vocabulary = vocabulary
+        self.pool_rows = pool_rows
+        self.negations = negations
+        self.rng = np.random.default_rng(seed)
+        self.position = 0  # next slot to write
+        self.high = 0  # one past the highest slot ever written: samples are drawn below it
+        self.size = 0  # valid transitions
+        self.episodes_added = 0
+        layout = _layout(obs_dim, action_dim, max_objects, vocabulary.max_length)
+        self.data: dict[str, np.ndarray] = {
+            name: np.zeros((capacity, *shape), dtype=dtype) for name, (dtype, shape) in layout.items()
+        }
+
+    def __len__(self) -> int:
+        return self.size
+
+    @property
+    def bytes_per_transition(self) -> int:
+        """Memory one slot takes once written, over all the stored arrays."""
+        return sum(array[0].nbytes for array in self.data.values())
+
+    # -- writing -------------------------------------------------------------------------------------------
+
+    def add_episode(self, episode: EpisodeData) -> None:
+        """Store one episode, retiring whole older episodes where it overwrites them."""
+        steps = len(episode)
+        objects = [o if isinstance(o, ObjectProps) else ObjectProps(*o) for o in episode.objects]
+        self._check(episode, steps, len(objects))
+        if steps > self.capacity:
+            raise ValueError(f"an episode of {steps} steps does not fit a buffer of {self.capacity} transitions")
+        if self.position + steps > self.capacity:
+            self._retire(self.position, self.capacity)
+            self.position = 0
+        lo, hi = self.position, self.position + steps
+        self._retire(lo, hi)
+
+        n = len(objects)
+        d = self.data
+        d["obs"][lo:hi] = episode.observations
+        d["next_obs"][lo:hi] = episode.next_observations
+        d["action"][lo:hi] = episode.actions
+        d["reward"][lo:hi] = episode.rewards
+        d["terminated"][lo:hi] = episode.terminated
+        d["instruction"][lo:hi] = episode.instructions
+        d["next_instruction"][lo:hi] = episode.next_instructions
+        d["achieved"][lo:hi] = False
+        d["achieved"][lo:hi, :n] = episode.achieved
+        d["goal_index"][lo:hi] = episode.goal_index
+        d["objects"][lo:hi] = NO_OBJECT
+        d["objects"][lo:hi, :n, 0] = [COLOURS.index(o.colour) for o in objects]
+        d["objects"][lo:hi, :n, 1] = [SHAPES.index(o.shape) for o in objects]
+        d["task"][lo:hi] = TASKS.index(episode.task)
+        d["episode_start"][lo:hi] = lo
+        d["episode_length"][lo:hi] = steps
+
+        rows = min(steps, self.pool_rows)
+        pool = sentence_pool(episode.task, objects, rows, self.vocabulary, self.negations, self.rng)
+        d["identifiable"][lo:hi] = False
+        d["identifiable"][lo:hi, :n] = pool.identifiable
+        d["plain_pool"][lo:hi] = 0
+        d["corrected_pool"][lo:hi] = 0
+        d["plain_pool"][lo : lo + rows, :n] = pool.plain
+        d["corrected_pool"][lo : lo + rows, :n] = pool.corrected
+
+        achieving = np.flatnonzero((episode.achieved & pool.identifiable).any(axis=1))
+        first = np.searchsorted(achieving, np.arange(steps))
+        d["achieving_slot"][lo:hi] = 0
+        d["achieving_slot"][lo : lo + achieving.size] = lo + achieving
+        d["future_first"][lo:hi] = lo + first
+        d["future_count"][lo:hi] = achieving.size - first
+
+        d["valid"][lo:hi] = True
+        self.size += steps
+        self.position = hi
+        self.high = max(self.high, hi)
+        self.episodes_added += 1
+
+    def _check(self, episode: EpisodeData, steps: int, n_objects: int) -> None:
+        check_task(episode.task)
+        length = self.vocabulary.max_length
+        expected = {
+            "observations": (steps, self.obs_dim),
+            "next_observations": (steps, self.obs_dim),
+            "instructions": (steps, length),
+            "next_instructions": (steps, length),
+            "actions": (steps, self.action_dim),
+            "rewards": (steps,),
+            "terminated": (steps,),
+            "achieved": (steps, n_objects),
+        }
+        for name, shape in expected.items():
+            got = np.shape(getattr(episode, name))
+            if got != shape:
+                raise ValueError(f"episode {name} has shape {got}, expected {shape}")
+        if steps < 1:
+            raise ValueError("an episode needs at least one step")
+        if not 1 <= n_objects <= self.max_objects:
+            raise ValueError(f"an episode has {n_objects} objects; this buffer holds 1 to {self.max_objects}")
+        if not 0 <= episode.goal_index < n_objects:
+            raise ValueError(f"goal_index {episode.goal_index} is not one of the {n_objects} objects")
+
+    def _retire(self, lo: int, hi: int) -> None:
+        """Invalidate every episode that has a slot in [lo, hi), all of its slots."""
+        valid = self.data["valid"]
+        if lo >= hi:
+            return
+        if valid[lo]:
+            lo = int(self.data["episode_start"][lo])
+        if valid[hi - 1]:
+            hi = int(self.data["episode_start"][hi - 1] + self.data["episode_length"][hi - 1])
+        self.size -= int(np.count_nonzero(valid[lo:hi]))
+        valid[lo:hi] = False
+
+    # -- sampling ------------------------------------------------------------------------------------------
+
+    def sample(
+        self,
+        batch_size: int,
+        rng: np.random.Generator,
+        relabel_ratio: float = 0.0,
+        correction_share: float = 0.0,
+    ) -> Batch:
+        """``batch_size`` transitions drawn uniformly from the stored ones (with replacement).
+
+        With probability ``relabel_ratio`` a transition whose episode later achieves the task on an
+        identifiable object gets a sentence for such an object: a step t' is drawn uniformly among the
+        steps at or after t that achieved the task on one, then one of those objects uniformly. Its reward
+        and done flag are recomputed from the stored ``achieved`` flags at step t. A share
+        ``correction_share`` of the relabelled sentences are corrections rather than plain instructions.
+        """
+        if self.size == 0:
+            raise ValueError("cannot sample from an empty replay buffer")
+        d = self.data
+        idx = self._draw_valid(batch_size, rng)
+        instruction = d["instruction"][idx].astype(np.int64)
+        next_instruction = d["next_instruction"][idx].astype(np.int64)
+        reward = d["reward"][idx]
+        done = d["terminated"][idx]
+
+        relabel = (d["future_count"][idx] > 0) & (rng.random(batch_size) < relabel_ratio)
+        rows = idx[relabel]
+        if rows.size:
+            step = d["achieving_slot"][d["future_first"][rows] + rng.integers(0, d["future_count"][rows])]
+            candidates = d["achieved"][step] & d["identifiable"][step]
+            target = np.argmax(np.where(candidates, rng.random(candidates.shape), -1.0), axis=1)
+            pool_row = d["episode_start"][rows] + rng.integers(0, np.minimum(d["episode_length"][rows], self.pool_rows))
+            corrected = rng.random(rows.size) < correction_share
+            sentence = np.where(
+                corrected[:, None], d["corrected_pool"][pool_row, target], d["plain_pool"][pool_row, target]
+            )
+            success = d["achieved"][rows, target]
+            instruction[relabel] = sentence
+            next_instruction[relabel] = sentence
+            reward[relabel] = np.where(success, SUCCESS_REWARD, FAILURE_REWARD)
+            done[relabel] = success
+
+        return Batch(
+            obs=d["obs"][idx],
+            instruction=instruction,
+            action=d["action"][idx],
+            reward=reward,
+            next_obs=d["next_obs"][idx],
+            next_instruction=next_instruction,
+            done=done,
+            relabelled=relabel,
+            slots=idx,
+        )
+
+    def _draw_valid(self, batch_size: int, rng: np.random.Generator) -> np.ndarray:
+        """Uniform slots among the valid ones, by rejection: invalid slots are at most a tail and a
+        retired remainder of an episode each, so one round nearly always suffices."""
+        valid = self.data["valid"]
+        chosen = np.empty(0, dtype=np.int64)
+        while chosen.size < batch_size:
+            draw = rng.integers(0, self.high, size=batch_size)
+            chosen = np.concatenate([chosen, draw[valid[draw]]])
+        return chosen[:batch_size]
+
+    # -- saving --------------------------------------------------------------------------------------------
+
+    def save(self, path: str | Path) -> None:
+        """Write the buffer as a compressed ``.npz`` that :meth:`load` reads back exactly."""
+        meta = {
+            "format": _FORMAT,
+            "capacity": self.capacity,
+            "obs_dim": self.obs_dim,
+            "action_dim": self.action_dim,
+            "max_objects": self.max_objects,
+            "vocabulary": self.vocabulary.to_dict(),
+            "pool_rows": self.pool_rows,
+            "negations": self.negations,
+            "position": self.position,
+            "high": self.high,
+            "size": self.size,
+            "episodes_added": self.episodes_added,
+            "rng": self.rng.bit_generator.state,
+        }
+        arrays = {name: array[: self.high] for name, array in self.data.items()}
+        with open(path, "wb") as f:
+            np.savez_compressed(f, meta=np.array(json.dumps(meta)), **arrays)
+
+    @classmethod
+    def load(cls, path: str | Path) -> ReplayBuffer:
+        with np.load(path, allow_pickle=False) as archive:
+            meta = json.loads(str(archive["meta"]))
+            if meta["format"] != _FORMAT:
+                raise ValueError(f"replay buffer file format {meta['format']} is not {_FORMAT}")
+            buffer = cls(
+                capacity=meta["capacity"],
+                obs_dim=meta["obs_dim"],
+                action_dim=meta["action_dim"],
+                max_objects=meta["max_objects"],
+                vocabulary=Vocabulary.from_dict(meta["vocabulary"]),
+                pool_rows=meta["pool_rows"],
+                negations=meta["negations"],
+            )
+            high = meta["high"]
+            for name, array in buffer.data.items():
+                array[:high] = archive[name]
+        buffer.rng.bit_generator.state = meta["rng"]
+        buffer.position = meta["position"]
+        buffer.high = high
+        buffer.size = meta["size"]
+        buffer.episodes_added = meta["episodes_added"]
+        return buffer

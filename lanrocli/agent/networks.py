@@ -1,0 +1,189 @@
+"""The networks of the language-conditioned SAC: a sentence encoder, a squashed-Gaussian actor and Q critics.
+
+Both actor and critic read an observation through a 128-unit layer and join it with a 32-number summary of
+the goal sentence (and, for the critic, the action) before the 256-unit hidden layers. The sentence summary
+is computed by a :class:`LanguageEncoder` that each network holds as ``encoder``; the networks take the
+summary as an input rather than the tokens, so the agent decides whether actor and critic read the
+sentence through separate encoders (the default) or through the critic's one.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from lanrocli.language import PAD_ID
+
+
+class LanguageEncoder(nn.Module):
+    """Word embedding and a GRU; the GRU's state after the sentence's last true word summarises the sentence.
+
+    The GRU runs over the padded array (one fused call for the batch) and the summary is read at position
+    ``length - 1``. A unidirectional GRU's state there depends only on the words up to it, so the padding
+    that follows is never read as words and the summary does not depend on the padded length L. Padding is
+    assumed to follow the words, as :meth:`Vocabulary.encode` puts it.
+
+    Two savings keep the GRU, the costliest part of an update on CPU, cheap: each distinct sentence of a
+    batch is encoded once (a batch repeats sentences, and an update encodes a transition's sentence and
+    its next sentence, nearly always the same), and the GRU stops after the batch's longest sentence.
+    """
+
+    def __init__(self, vocab_size: int, embedding_size: int, hidden_size: int) -> None:
+        super().__init__()
+        self.embedding = nn.Embedding(vocab_size, embedding_size, padding_idx=PAD_ID)
+        self.gru = nn.GRU(embedding_size, hidden_size, batch_first=True)
+        self.vocab_size = vocab_size
+        self.output_size = hidden_size
+
+    def forward(self, tokens: torch.Tensor) -> torch.Tensor:
+        """``tokens``: int64 [B, L] ids padded with 0. Returns float [B, hidden]."""
+        sentences, inverse = self._distinct(tokens)
+        return self._summarise(sentences)[inverse]
+
+    def _distinct(self, tokens: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The distinct rows of ``tokens`` and, per row, the index of its distinct row."""
+        length = tokens.shape[1]
+        if self.vocab_size**length >= 2**63:
+            sentences, inverse = torch.unique(tokens, dim=0, return_inverse=True)
+            return sentences, inverse
+        # A sentence read as a number in base vocab_size: distinct numbers are far cheaper to find than
+        # distinct rows. Any row with a given number stands for all of them, as they hold the same words.
+        powers = self.vocab_size ** torch.arange(length, device=tokens.device, dtype=torch.int64)
+        numbers, inverse = torch.unique((tokens * powers).sum(dim=1), return_inverse=True)
+        rows = torch.arange(tokens.shape[0], device=tokens.device)
+        first = torch.empty_like(numbers).scatter_(0, inverse, rows)
+        return tokens[first], inverse
+
+    def _summarise(self, tokens: torch.Tensor) -> torch.Tensor:
+        lengths = (tokens != PAD_ID).sum(dim=1)
+        steps = max(int(lengths.max()), 1)
+        states, _ = self.gru(self.embedding(tokens[:, :steps]))
+        last = (lengths - 1).clamp(min=0)
+        summary = states[torch.arange(tokens.shape[0], device=tokens.device), last]
+        # An empty sentence has read no word: its summary is the GRU's initial state, zero.
+        return summary * (lengths > 0).unsqueeze(1).to(summary.dtype)
+
+
+def _mlp(input_size: int, hidden_size: int, depth: int) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for _ in range(depth):
+        layers += [nn.Linear(input_size, hidden_size), nn.ReLU()]
+        input_size = hidden_size
+    return nn.Sequential(*layers)
+
+
+class Actor(nn.Module):
+    """A Gaussian policy squashed by tanh into the action box [-1, 1].
+
+    ``encoder`` is ``None`` when the actor reads the critic's sentence summary instead of its own.
+    """
+
+    def __init__(
+        self,
+        obs_dim: int,
+        action_dim: int,
+        encoder: LanguageEncoder | None,
+        language_size: int,
+        obs_size: int,
+        hidden_size: int,
+        depth: int,
+        log_std_min: float,
+        log_std_max: float,
+    ) -> None:
+        super().__init__()
+        self.encoder = encoder
+        self.obs_layer = nn.Linear(obs_dim, obs_size)
+        self.body = _mlp(obs_size + language_size, hidden_size, depth)
+        body_size = hidden_size if depth > 0 else obs_size + language_size
+        self.mean = nn.Linear(body_size, action_dim)
+        self.log_std = nn.Linear(body_size, action_dim)
+        self.log_std_min = log_std_min
+        self.log_std_max = log_std_max
+
+    def forward(self, obs: torch.Tensor, language: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The mean and log standard deviation of the Gaussian before the squashing."""
+        h = self.body(torch.cat([F.relu(self.obs_layer(obs)), language], dim=1))
+        log_std = self.log_std(h).clamp(self.log_std_min, self.log_std_max)
+        return self.mean(h), log_std
+
+    def sample(
+        self, obs: torch.Tensor, language: torch.Tensor, generator: torch.Generator
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """A reparameterised action in [-1, 1] and its log-probability under the squashed Gaussian.
+
+        The noise comes from ``generator`` (never torch's global one) so that the agent's random stream is
+        part of its saved state and a resumed run draws the same actions.
+        """
+        mean, log_std = self(obs, language)
+        std = log_std.exp()
+        noise = torch.randn(mean.shape, generator=generator, device=mean.device, dtype=mean.dtype)
+        u = mean + std * noise
+        gaussian_log_prob = (-0.5 * noise.pow(2) - log_std - 0.5 * math.log(2 * math.pi)).sum(dim=1)
+        # Change of variables for a = tanh(u): log|da/du| = log(1 - tanh(u)^2), written in a form that
+        # stays finite when tanh(u) saturates at +-1.
+        log_det = (2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))).sum(dim=1)
+        return torch.tanh(u), gaussian_log_prob - log_det
+
+    def mode(self, obs: torch.Tensor, language: torch.Tensor) -> torch.Tensor:
+        """The deterministic action for evaluation: the squashed mean."""
+        mean, _ = self(obs, language)
+        return torch.tanh(mean)
+
+
+class EnsembleLinear(nn.Module):
+    """``n`` independent linear layers evaluated in one batched matmul, so two critics cost one call.
+
+    Input [n, B, in] (or [B, in], shared by all members), output [n, B, out]. Each member is initialised
+    like :class:`torch.nn.Linear`.
+    """
+
+    def __init__(self, n: int, in_features: int, out_features: int) -> None:
+        super().__init__()
+        bound = 1.0 / math.sqrt(in_features)
+        self.weight = nn.Parameter(torch.empty(n, in_features, out_features).uniform_(-bound, bound))
+        self.bias = nn.Parameter(torch.empty(n, 1, out_features).uniform_(-bound, bound))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if x.dim() == 2:
+            x = x.expand(self.weight.shape[0], *x.shape)
+        return torch.baddbmm(self.bias, x, self.weight)
+
+
+class Critic(nn.Module):
+    """``n_critics`` Q networks (one, or two for clipped double Q) evaluated together.
+
+    Each member has its own observation layer and hidden layers; they read the same sentence summary, from
+    the critic's ``encoder``.
+    """
+
+    def __init__(
+        self,
+        obs_dim: int,
+        action_dim: int,
+        encoder: LanguageEncoder,
+        obs_size: int,
+        hidden_size: int,
+        depth: int,
+        n_critics: int,
+    ) -> None:
+        super().__init__()
+        self.encoder = encoder
+        self.obs_layer = EnsembleLinear(n_critics, obs_dim, obs_size)
+        layers: list[nn.Module] = []
+        input_size = obs_size + encoder.output_size + action_dim
+        for _ in range(depth):
+            layers += [EnsembleLinear(n_critics, input_size, hidden_size), nn.ReLU()]
+            input_size = hidden_size
+        self.body = nn.Sequential(*layers)
+        self.q = EnsembleLinear(n_critics, input_size, 1)
+        self.n_critics = n_critics
+
+    def forward(self, obs: torch.Tensor, language: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """Q values of shape [n_critics, B]."""
+        obs_features = F.relu(self.obs_layer(obs))
+        shared = torch.cat([language, action], dim=1).expand(self.n_critics, -1, -1)
+        h = self.body(torch.cat([obs_features, shared], dim=2))
+        return self.q(h).squeeze(2)

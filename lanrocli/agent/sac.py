@@ -1,0 +1,322 @@
+"""Soft Actor-Critic for language-conditioned goals, with the paper's hyperparameters as defaults."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+from torch import nn
+
+from lanrocli.agent.buffer import Batch, ReplayBuffer
+from lanrocli.agent.networks import Actor, Critic, LanguageEncoder
+from lanrocli.agent.normalizer import RunningNormalizer
+
+_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class SACSettings:
+    """Every number of the agent. Defaults are the paper's (its appendix, table of hyperparameters) where it
+    gives one, else those of the SAC baseline it builds on."""
+
+    batch_size: int = 256
+    actor_lr: float = 1e-3
+    critic_lr: float = 1e-3
+    alpha_lr: float = 1e-3
+    alpha: float = 0.2
+    """Entropy temperature; the initial value when ``autotune_alpha``."""
+    autotune_alpha: bool = True
+    target_entropy: float | None = None
+    """Entropy the temperature tuning aims at; ``None`` means -action_dim."""
+    gamma: float = 0.98
+    polyak: float = 0.95
+    """target <- polyak * target + (1 - polyak) * online, after every update."""
+    buffer_size: int = 1_000_000
+    critics: int = 1
+    """1 as in the paper; 2 for clipped double Q (the target takes the smaller)."""
+    updates_per_step: int = 1
+    """Gradient updates per collected environment step; read by the training loop."""
+    embedding_size: int = 32
+    language_size: int = 32
+    """GRU hidden size: the length of the sentence summary."""
+    obs_size: int = 128
+    hidden_size: int = 256
+    hidden_layers: int = 1
+    share_encoder: bool = False
+    """One sentence encoder for actor and critic, trained by the critic's loss only."""
+    max_grad_norm: float | None = None
+    """Clip each network's gradient to this norm; ``None`` leaves gradients as they are."""
+    log_std_min: float = -20.0
+    log_std_max: float = 2.0
+    obs_clip: float = 5.0
+    """Normalised observations are clipped to +-obs_clip."""
+    obs_var_eps: float = 1e-4
+    """Added to the observation variance: a feature that barely varies is scaled by at most 100."""
+    relabel_ratio: float = 0.8
+    """Probability that a sampled transition is relabelled, where its episode achieved the task on some
+    object at that step or later."""
+    relabel_corrections: bool = True
+    correction_share: float = 0.5
+    """With ``relabel_corrections``, the share of relabelled sentences that are corrections."""
+
+    ARCHITECTURE: ClassVar[tuple[str, ...]] = (
+        "critics", "embedding_size", "language_size", "obs_size", "hidden_size", "hidden_layers", "share_encoder",
+        "autotune_alpha",
+    )
+    """The settings that shape the networks and the optimiser's state: a saved agent loads only into one
+    that agrees on them."""
+
+    def __post_init__(self) -> None:
+        if self.critics not in (1, 2):
+            raise ValueError(f"critics must be 1 or 2, got {self.critics}")
+        if self.alpha <= 0.0:
+            raise ValueError(f"alpha must be positive, got {self.alpha}")
+        if not 0.0 <= self.polyak <= 1.0 or not 0.0 <= self.gamma <= 1.0:
+            raise ValueError("gamma and polyak must lie in [0, 1]")
+        for name in ("relabel_ratio", "correction_share"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
+        if self.batch_size < 1 or self.hidden_layers < 0 or self.updates_per_step < 0:
+            raise ValueError("batch_size must be positive and hidden_layers, updates_per_step not negative")
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> SACSettings:
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"unknown SAC settings: {', '.join(unknown)}")
+        return cls(**data)
+
+
+class SACAgent:
+    """The agent: networks, their optimisers, the entropy temperature and the observation normaliser.
+
+    Everything random in it (initial weights, exploration and target-policy noise) derives from ``seed``:
+    the weights are drawn inside a forked torch RNG, so building an agent leaves torch's global generator
+    untouched, and the noise comes from the agent's own generator, whose state is part of
+    :meth:`state_dict`, so a resumed run continues the same stream.
+    """
+
+    def __init__(
+        self,
+        obs_dim: int,
+        action_dim: int,
+        vocab_size: int,
+        settings: SACSettings | None = None,
+        seed: int = 0,
+        device: str | torch.device = "cpu",
+    ) -> None:
+        self.settings = s = settings if settings is not None else SACSettings()
+        self.obs_dim = obs_dim
+        self.action_dim = action_dim
+        self.vocab_size = vocab_size
+        self.device = torch.device(device)
+        weight_seed, noise_seed = (int(x) for x in np.random.SeedSequence(seed).generate_state(2))
+
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(weight_seed)
+            critic_encoder = LanguageEncoder(vocab_size, s.embedding_size, s.language_size)
+            actor_encoder = None if s.share_encoder else LanguageEncoder(vocab_size, s.embedding_size, s.language_size)
+            self.actor = Actor(
+                obs_dim, action_dim, actor_encoder, s.language_size, s.obs_size, s.hidden_size, s.hidden_layers,
+                s.log_std_min, s.log_std_max,
+            ).to(self.device)
+            self.critic = Critic(
+                obs_dim, action_dim, critic_encoder, s.obs_size, s.hidden_size, s.hidden_layers, s.critics
+            ).to(self.device)
+        self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
+        self.normalizer = RunningNormalizer(obs_dim, s.obs_clip, s.obs_var_eps).to(self.device)
+        self.log_alpha = torch.tensor(math.log(s.alpha), device=self.device, requires_grad=s.autotune_alpha)
+        self.target_entropy = s.target_entropy if s.target_entropy is not None else -float(action_dim)
+
+        # One Adam with a parameter group per learner: the losses touch disjoint parameters, so a single
+        # step applies all three updates, and fused Adam does it in one kernel, on CPU as on CUDA.
+        learners = [list(self.critic.parameters()), list(self.actor.parameters())]
+        if s.autotune_alpha:
+            learners.append([self.log_alpha])
+        groups = [{"params": params, "lr": lr} for params, lr in zip(learners, self._learning_rates())]
+        self.optimizer = torch.optim.Adam(groups, fused=True)
+        self.generator = torch.Generator(device=self.device)
+        self.generator.manual_seed(noise_seed)
+        self.updates = 0
+
+    def _learning_rates(self) -> list[float]:
+        """Per parameter group of the optimiser: critic, actor, then the temperature when it is tuned."""
+        s = self.settings
+        return [s.critic_lr, s.actor_lr, s.alpha_lr][: 3 if s.autotune_alpha else 2]
+
+    # -- acting --------------------------------------------------------------------------------------------
+
+    @property
+    def actor_encoder(self) -> LanguageEncoder:
+        """The encoder the actor reads sentences with: its own, or the critic's when shared."""
+        return self.actor.encoder if self.actor.encoder is not None else self.critic.encoder
+
+    def _tensor(self, array: np.ndarray, dtype: torch.dtype) -> torch.Tensor:
+        return torch.as_tensor(np.asarray(array), device=self.device).to(dtype)
+
+    @torch.no_grad()
+    def act(self, obs: Mapping[str, np.ndarray], deterministic: bool = False) -> np.ndarray:
+        """Actions in [-1, 1] for a batch ``{"observation": [B, N], "instruction": [B, L]}`` (or one
+        unbatched observation, answered with one unbatched action)."""
+        observation = np.asarray(obs["observation"])
+        single = observation.ndim == 1
+        x = self.normalizer(self._tensor(observation, torch.float32).reshape(-1, self.obs_dim))
+        tokens = self._tensor(obs["instruction"], torch.int64).reshape(x.shape[0], -1)
+        language = self.actor_encoder(tokens)
+        if deterministic:
+            action = self.actor.mode(x, language)
+        else:
+            action, _ = self.actor.sample(x, language, self.generator)
+        out = action.cpu().numpy()
+        return out[0] if single else out
+
+    def update_normalizer(self, observations: np.ndarray) -> None:
+        """Add collected observations [n, N] to the normaliser's statistics (not relabelled samples)."""
+        self.normalizer.update(observations)
+
+    # -- learning ------------------------------------------------------------------------------------------
+
+    def update(self, batch: Batch) -> dict[str, float]:
+        """One SAC update of critic, actor and temperature on ``batch``, then of the target critic.
+
+        All three losses are computed from the parameters as they are before the update, as the original
+        SAC does; they touch disjoint parameters, so one backward pass gives every network its gradient.
+        """
+        s = self.settings
+        obs = self.normalizer(self._tensor(batch.obs, torch.float32))
+        next_obs = self.normalizer(self._tensor(batch.next_obs, torch.float32))
+        tokens = self._tensor(batch.instruction, torch.int64)
+        next_tokens = self._tensor(batch.next_instruction, torch.int64)
+        action = self._tensor(batch.action, torch.float32)
+        reward = self._tensor(batch.reward, torch.float32)
+        not_done = 1.0 - self._tensor(batch.done, torch.float32)
+        alpha = self.log_alpha.detach().exp()
+
+        # One encoder pass per network over this and the next sentences (they nearly always coincide). A
+        # shared encoder learns from the critic's loss alone: the actor reads its summary detached.
+        sentences = torch.cat([tokens, next_tokens])
+        critic_summary = self.critic.encoder(sentences)
+        actor_summary = critic_summary.detach() if self.actor.encoder is None else self.actor.encoder(sentences)
+        critic_language = critic_summary[: tokens.shape[0]]
+        actor_language, next_actor_language = actor_summary.chunk(2)
+
+        # Critic: regress on the soft Bellman target of the target critic and the current policy.
+        with torch.no_grad():
+            next_action, next_log_prob = self.actor.sample(next_obs, next_actor_language, self.generator)
+            next_q = self.target_critic(next_obs, self.target_critic.encoder(next_tokens), next_action)
+            target_q = reward + s.gamma * not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
+        q = self.critic(obs, critic_language, action)
+        critic_loss = (q - target_q).pow(2).mean(dim=1).sum()
+
+        # Actor: maximise the critic's value plus entropy. The critic is frozen while it judges the policy's
+        # actions, so this loss sends gradient to the actor only.
+        pi_action, log_prob = self.actor.sample(obs, actor_language, self.generator)
+        self.critic.requires_grad_(False)
+        q_pi = self.critic(obs, critic_language.detach(), pi_action).min(dim=0).values
+        self.critic.requires_grad_(True)
+        actor_loss = (alpha * log_prob - q_pi).mean()
+
+        # Temperature: raise alpha when the policy's entropy falls below the target, lower it above. (Without
+        # tuning, log_alpha has no gradient and this loss is only reported.)
+        alpha_loss = -(self.log_alpha * (log_prob.detach() + self.target_entropy)).mean()
+
+        self.optimizer.zero_grad(set_to_none=True)
+        (critic_loss + actor_loss + alpha_loss).backward()
+        if s.max_grad_norm is not None:
+            nn.utils.clip_grad_norm_(self.critic.parameters(), s.max_grad_norm)
+            nn.utils.clip_grad_norm_(self.actor.parameters(), s.max_grad_norm)
+        self.optimizer.step()
+        with torch.no_grad():
+            torch._foreach_lerp_(list(self.target_critic.parameters()), list(self.critic.parameters()), 1.0 - s.polyak)
+        self.updates += 1
+
+        with torch.no_grad():
+            metrics = torch.stack(
+                [critic_loss, actor_loss, alpha_loss, alpha, q.mean(), target_q.mean(), -log_prob.mean()]
+            ).tolist()
+        names = ("critic_loss", "actor_loss", "alpha_loss", "alpha", "q_mean", "target_q_mean", "entropy")
+        return dict(zip(names, metrics))
+
+    def learn(self, buffer: ReplayBuffer, rng: np.random.Generator, n_updates: int) -> dict[str, float]:
+        """``n_updates`` updates on batches sampled (and relabelled per the settings) from ``buffer``;
+        returns the metrics averaged over them."""
+        s = self.settings
+        share = s.correction_share if s.relabel_corrections else 0.0
+        totals: dict[str, float] = {}
+        if n_updates < 1:
+            return totals
+        for _ in range(n_updates):
+            batch = buffer.sample(s.batch_size, rng, relabel_ratio=s.relabel_ratio, correction_share=share)
+            for name, value in self.update(batch).items():
+                totals[name] = totals.get(name, 0.0) + value
+        return {name: value / n_updates for name, value in totals.items()}
+
+    # -- state ---------------------------------------------------------------------------------------------
+
+    def state_dict(self) -> dict[str, Any]:
+        """Tensors and plain data only, so ``torch.load(..., weights_only=True)`` reads it back."""
+        return {
+            "format": _FORMAT,
+            "obs_dim": self.obs_dim,
+            "action_dim": self.action_dim,
+            "vocab_size": self.vocab_size,
+            "settings": self.settings.to_dict(),
+            "actor": self.actor.state_dict(),
+            "critic": self.critic.state_dict(),
+            "target_critic": self.target_critic.state_dict(),
+            "normalizer": self.normalizer.state_dict(),
+            "log_alpha": self.log_alpha.detach().clone(),
+            "optimizer": self.optimizer.state_dict(),
+            "generator": self.generator.get_state(),
+            "updates": self.updates,
+        }
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Restore what :meth:`state_dict` saved into an agent of the same dimensions and architecture.
+
+        The other settings (learning rates, gamma, relabelling, ...) stay this agent's, so a run may change
+        them between stages and still continue from the saved weights and optimiser moments.
+        """
+        if state["format"] != _FORMAT:
+            raise ValueError(f"agent state format {state['format']} is not {_FORMAT}")
+        saved = SACSettings.from_dict(state["settings"])
+        for name in ("obs_dim", "action_dim", "vocab_size"):
+            if state[name] != getattr(self, name):
+                raise ValueError(f"the saved agent has {name} {state[name]}, this one {getattr(self, name)}")
+        for name in SACSettings.ARCHITECTURE:
+            if getattr(saved, name) != getattr(self.settings, name):
+                raise ValueError(
+                    f"the saved agent has settings {name}={getattr(saved, name)!r}, this one "
+                    f"{getattr(self.settings, name)!r}; build it with SACAgent.from_state_dict"
+                )
+        self.actor.load_state_dict(state["actor"])
+        self.critic.load_state_dict(state["critic"])
+        self.target_critic.load_state_dict(state["target_critic"])
+        self.normalizer.load_state_dict(state["normalizer"])
+        with torch.no_grad():
+            self.log_alpha.copy_(state["log_alpha"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        for group, lr in zip(self.optimizer.param_groups, self._learning_rates()):
+            group["lr"] = lr
+        self.generator.set_state(state["generator"].cpu())
+        self.updates = int(state["updates"])
+
+    @classmethod
+    def from_state_dict(cls, state: Mapping[str, Any], device: str | torch.device = "cpu") -> SACAgent:
+        """An agent rebuilt from its saved dimensions and settings, then loaded."""
+        agent = cls(
+            state["obs_dim"], state["action_dim"], state["vocab_size"], SACSettings.from_dict(state["settings"]),
+            device=device,
+        )
+        agent.load_state_dict(state)
+        return agent

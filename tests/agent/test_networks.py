@@ -1,0 +1,142 @@
+"""The sentence encoder, the squashed-Gaussian actor, the critic ensemble and the observation normaliser."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, LanguageEncoder
+from lanrocli.agent.normalizer import RunningNormalizer
+from lanrocli.language import grammar_vocabulary, sample_sentence
+
+VOCAB = grammar_vocabulary()
+
+
+def _encoder(seed: int = 0) -> LanguageEncoder:
+    torch.manual_seed(seed)
+    return LanguageEncoder(len(VOCAB), 32, 32)
+
+
+def _sentences(n: int, seed: int = 0) -> torch.Tensor:
+    rng = np.random.default_rng(seed)
+    texts = [sample_sentence(rng, "push", corrections=bool(rng.random() < 0.5), negations=True).text for _ in range(n)]
+    return torch.as_tensor(VOCAB.encode_many(texts))
+
+
+def test_summary_is_the_gru_state_after_the_last_true_word() -> None:
+    encoder = _encoder()
+    tokens = _sentences(40)
+    with torch.no_grad():
+        summary = encoder(tokens)
+        for row, out in zip(tokens, summary):
+            words = row[row != 0]
+            _, h = encoder.gru(encoder.embedding(words.unsqueeze(0)))
+            torch.testing.assert_close(out, h[0, 0], rtol=1e-5, atol=1e-6)
+
+
+def test_summary_does_not_depend_on_the_padded_length() -> None:
+    encoder = _encoder()
+    tokens = _sentences(30)
+    longer = torch.cat([tokens, torch.zeros(30, 7, dtype=torch.int64)], dim=1)
+    with torch.no_grad():
+        torch.testing.assert_close(encoder(tokens), encoder(longer))
+        # Nor on which other sentences share the batch.
+        torch.testing.assert_close(encoder(tokens[:5]), encoder(tokens)[:5])
+
+
+def test_repeated_sentences_give_the_gradients_of_encoding_every_row() -> None:
+    tokens = _sentences(12)
+    tokens = torch.cat([tokens, tokens[:6], tokens[2:3].repeat(5, 1)])
+    weights = torch.randn(tokens.shape[0], 32)
+    shared, reference = _encoder(), _encoder()
+    (shared(tokens) * weights).sum().backward()
+    (reference._summarise(tokens) * weights).sum().backward()
+    for a, b in zip(shared.parameters(), reference.parameters()):
+        torch.testing.assert_close(a.grad, b.grad)
+
+
+def test_an_empty_sentence_reads_nothing() -> None:
+    encoder = _encoder()
+    tokens = torch.zeros(3, VOCAB.max_length, dtype=torch.int64)
+    tokens[1, :4] = torch.as_tensor(VOCAB.encode("push the red cube")[:4])
+    out = encoder(tokens)
+    assert torch.equal(out[0], torch.zeros(32)) and torch.equal(out[2], torch.zeros(32))
+    assert out[1].abs().sum() > 0
+
+
+def _actor() -> Actor:
+    torch.manual_seed(0)
+    return Actor(6, 3, None, 32, 16, 32, 1, -20.0, 2.0)
+
+
+def test_actor_log_prob_is_the_density_of_the_squashed_gaussian() -> None:
+    actor = _actor()
+    obs, language = torch.randn(64, 6), torch.randn(64, 32)
+    action, log_prob = actor.sample(obs, language, torch.Generator().manual_seed(1))
+    mean, log_std = actor(obs, language)
+    squashed = torch.distributions.TransformedDistribution(
+        torch.distributions.Normal(mean, log_std.exp()), [torch.distributions.TanhTransform()]
+    )
+    # Keep away from +-1, where float32 atanh loses the precision the reference needs.
+    inside = action.abs().amax(dim=1) < 0.999
+    expected = squashed.log_prob(action).sum(dim=1)
+    torch.testing.assert_close(log_prob[inside], expected[inside], rtol=1e-4, atol=1e-3)
+    assert action.abs().max() <= 1.0
+
+
+def test_deterministic_action_is_the_squashed_mean() -> None:
+    actor = _actor()
+    obs, language = torch.randn(8, 6), torch.randn(8, 32)
+    mean, _ = actor(obs, language)
+    assert torch.equal(actor.mode(obs, language), torch.tanh(mean))
+
+
+def test_log_prob_stays_finite_when_the_action_saturates() -> None:
+    actor = _actor()
+    with torch.no_grad():
+        actor.mean.bias.fill_(30.0)
+    _, log_prob = actor.sample(torch.randn(16, 6), torch.randn(16, 32), torch.Generator().manual_seed(0))
+    assert torch.isfinite(log_prob).all()
+
+
+def test_ensemble_members_are_independent_linear_layers() -> None:
+    torch.manual_seed(0)
+    layer = EnsembleLinear(2, 5, 4)
+    x = torch.randn(7, 5)
+    out = layer(x)
+    for i in range(2):
+        torch.testing.assert_close(out[i], x @ layer.weight[i] + layer.bias[i])
+
+
+def test_two_critics_differ_and_each_reads_obs_language_and_action() -> None:
+    torch.manual_seed(0)
+    critic = Critic(6, 3, _encoder(), 16, 32, 2, n_critics=2)
+    obs, language, action = torch.randn(10, 6), torch.randn(10, 32), torch.rand(10, 3)
+    q = critic(obs, language, action)
+    assert q.shape == (2, 10) and not torch.allclose(q[0], q[1])
+    for changed in (critic(obs + 1, language, action), critic(obs, language + 1, action), critic(obs, language, -action)):
+        assert not torch.allclose(changed, q)
+
+
+def test_normalizer_matches_the_statistics_of_everything_seen() -> None:
+    rng = np.random.default_rng(0)
+    norm = RunningNormalizer(4, clip=5.0, eps=1e-8)
+    chunks = [rng.normal(3.0, [1.0, 2.0, 0.5, 10.0], size=(n, 4)) for n in (1, 7, 100, 33)]
+    for chunk in chunks:
+        norm.update(chunk.astype(np.float32))
+    seen = np.concatenate(chunks).astype(np.float32).astype(np.float64)
+    np.testing.assert_allclose(norm.mean.numpy(), seen.mean(0), rtol=1e-10)
+    np.testing.assert_allclose(norm.var.numpy(), seen.var(0), rtol=1e-9)
+    x = torch.as_tensor(seen, dtype=torch.float32)
+    expected = ((seen - seen.mean(0)) / np.sqrt(seen.var(0) + 1e-8)).clip(-5, 5)
+    np.testing.assert_allclose(norm(x).numpy(), expected, rtol=1e-4, atol=1e-5)
+    assert norm(torch.full((1, 4), 1e6)).max() == 5.0
+
+
+def test_normalizer_state_round_trips() -> None:
+    norm = RunningNormalizer(3, clip=5.0, eps=1e-4)
+    norm.update(np.arange(12.0).reshape(4, 3))
+    other = RunningNormalizer(3, clip=5.0, eps=1e-4)
+    other.load_state_dict(norm.state_dict())
+    x = torch.randn(5, 3)
+    assert torch.equal(norm(x), other(x))

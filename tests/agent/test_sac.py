@@ -1,0 +1,182 @@
+"""The SAC agent: it learns, it is deterministic given its seed, and its state survives a weights-only load."""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+
+import numpy as np
+import pytest
+import torch
+
+from lanrocli.agent import Batch, ReplayBuffer, SACAgent, SACSettings
+
+from .episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
+
+RED = VOCAB.encode("reach the red cube")
+BLUE = VOCAB.encode("reach the blue cube")
+
+
+def _batch(rng: np.random.Generator, size: int = 64) -> Batch:
+    """A one-step problem: moving right (action[0] > 0) succeeds for the red cube, left for the blue one."""
+    red = rng.random(size) < 0.5
+    action = rng.uniform(-1, 1, size=(size, ACTION_DIM)).astype(np.float32)
+    success = (action[:, 0] > 0) == red
+    instruction = np.where(red[:, None], RED, BLUE)
+    return Batch(
+        obs=rng.normal(size=(size, OBS_DIM)).astype(np.float32),
+        instruction=instruction,
+        action=action,
+        reward=np.where(success, 0.0, -1.0).astype(np.float32),
+        next_obs=rng.normal(size=(size, OBS_DIM)).astype(np.float32),
+        next_instruction=instruction.copy(),
+        done=np.ones(size, dtype=bool),
+        relabelled=np.zeros(size, dtype=bool),
+        slots=np.arange(size),
+    )
+
+
+def _agent(seed: int = 0, **settings: object) -> SACAgent:
+    small = {"hidden_size": 64, "obs_size": 32, **settings}
+    return SACAgent(OBS_DIM, ACTION_DIM, len(VOCAB), SACSettings(**small), seed=seed)  # type: ignore[arg-type]
+
+
+def _parameters(agent: SACAgent) -> list[torch.Tensor]:
+    return [*agent.actor.parameters(), *agent.critic.parameters(), *agent.target_critic.parameters(), agent.log_alpha]
+
+
+def test_learns_which_way_each_sentence_asks_for() -> None:
+    rng = np.random.default_rng(0)
+    agent = _agent(batch_size=128)
+    for _ in range(250):
+        agent.update(_batch(rng, 128))
+    obs = rng.normal(size=(100, OBS_DIM)).astype(np.float32)
+    right = agent.act({"observation": obs, "instruction": np.tile(RED, (100, 1))}, deterministic=True)
+    left = agent.act({"observation": obs, "instruction": np.tile(BLUE, (100, 1))}, deterministic=True)
+    assert (right[:, 0] > 0).mean() > 0.95 and (left[:, 0] < 0).mean() > 0.95
+
+
+def test_critic_loss_falls_on_a_fixed_batch() -> None:
+    agent = _agent()
+    batch = _batch(np.random.default_rng(1), 128)
+    first = agent.update(batch)["critic_loss"]
+    for _ in range(120):
+        last = agent.update(batch)["critic_loss"]
+    assert last < 0.2 * first
+
+
+def test_same_seed_same_batches_same_parameters() -> None:
+    a, b, other = _agent(seed=3), _agent(seed=3), _agent(seed=4)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        batch = _batch(rng)
+        metrics_a, metrics_b = a.update(batch), b.update(batch)
+        other.update(batch)
+        assert metrics_a == metrics_b
+    assert all(torch.equal(x, y) for x, y in zip(_parameters(a), _parameters(b)))
+    assert not all(torch.equal(x, y) for x, y in zip(_parameters(a), _parameters(other)))
+
+
+def test_building_and_training_leave_torch_global_generator_alone() -> None:
+    torch.manual_seed(123)
+    state = torch.get_rng_state()
+    agent = _agent()
+    agent.update(_batch(np.random.default_rng(0)))
+    agent.act({"observation": np.zeros((2, OBS_DIM), np.float32), "instruction": np.tile(RED, (2, 1))})
+    assert torch.equal(torch.get_rng_state(), state)
+
+
+def test_state_survives_weights_only_load_and_resumes_bit_identically() -> None:
+    rng = np.random.default_rng(0)
+    agent = _agent(critics=2)
+    agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
+    for _ in range(3):
+        agent.update(_batch(rng))
+    file = io.BytesIO()
+    torch.save(agent.state_dict(), file)
+    file.seek(0)
+    resumed = SACAgent.from_state_dict(torch.load(file, weights_only=True))
+    assert resumed.settings == agent.settings and resumed.updates == agent.updates
+    obs = {"observation": rng.normal(size=(4, OBS_DIM)).astype(np.float32), "instruction": np.tile(BLUE, (4, 1))}
+    for _ in range(3):
+        batch = _batch(rng)
+        assert agent.update(batch) == resumed.update(batch)
+        assert np.array_equal(agent.act(obs), resumed.act(obs))  # same exploration noise too
+    assert all(torch.equal(x, y) for x, y in zip(_parameters(agent), _parameters(resumed)))
+    assert torch.equal(agent.normalizer.mean, resumed.normalizer.mean)
+
+
+def test_loading_needs_the_same_architecture_but_keeps_the_learning_settings() -> None:
+    state = _agent().state_dict()
+    with pytest.raises(ValueError, match="critics"):
+        _agent(critics=2).load_state_dict(state)
+    slower = _agent(critic_lr=1e-4, gamma=0.9)
+    slower.load_state_dict(state)
+    assert slower.settings.gamma == 0.9 and slower.optimizer.param_groups[0]["lr"] == 1e-4
+
+
+def test_target_critic_follows_by_polyak_averaging() -> None:
+    agent = _agent()
+    old_target = [p.clone() for p in agent.target_critic.parameters()]
+    agent.update(_batch(np.random.default_rng(0)))
+    polyak = agent.settings.polyak
+    for target, old, online in zip(agent.target_critic.parameters(), old_target, agent.critic.parameters()):
+        torch.testing.assert_close(target, polyak * old + (1 - polyak) * online)
+
+
+def test_actions_lie_in_the_box_batched_or_single() -> None:
+    agent = _agent()
+    rng = np.random.default_rng(0)
+    batch = agent.act({"observation": rng.normal(size=(5, OBS_DIM)) * 100, "instruction": np.tile(RED, (5, 1))})
+    single = agent.act({"observation": np.zeros(OBS_DIM), "instruction": RED}, deterministic=True)
+    assert batch.shape == (5, ACTION_DIM) and single.shape == (ACTION_DIM,)
+    assert np.abs(batch).max() <= 1.0 and np.abs(single).max() <= 1.0
+
+
+def test_shared_encoder_is_trained_by_the_critic_only() -> None:
+    agent = _agent(share_encoder=True)
+    assert agent.actor.encoder is None
+    encoder_before = [p.clone() for p in agent.critic.encoder.parameters()]
+    batch = _batch(np.random.default_rng(0))
+    agent.update(batch)
+    assert not all(torch.equal(a, b) for a, b in zip(encoder_before, agent.critic.encoder.parameters()))
+    assert {id(p) for p in agent.critic.encoder.parameters()}.isdisjoint(id(p) for p in agent.actor.parameters())
+
+
+def test_learn_samples_relabelled_batches_from_a_buffer() -> None:
+    rng = np.random.default_rng(0)
+    buffer = ReplayBuffer(2000, OBS_DIM, ACTION_DIM, seed=0)
+    for i in range(50):
+        buffer.add_episode(random_episode(rng, i))
+    agent = _agent(batch_size=32)
+    metrics = agent.learn(buffer, rng, n_updates=3)
+    assert agent.updates == 3 and set(metrics) >= {"critic_loss", "actor_loss", "alpha", "alpha_loss", "q_mean"}
+    assert all(np.isfinite(v) for v in metrics.values())
+
+
+def test_fixed_temperature_stays_fixed() -> None:
+    agent = _agent(autotune_alpha=False, alpha=0.05)
+    for _ in range(3):
+        metrics = agent.update(_batch(np.random.default_rng(0)))
+    assert metrics["alpha"] == pytest.approx(0.05)
+
+
+def test_settings_reject_nonsense_and_round_trip_as_plain_data() -> None:
+    with pytest.raises(ValueError):
+        SACSettings(critics=3)
+    with pytest.raises(ValueError):
+        SACSettings(relabel_ratio=1.5)
+    settings = SACSettings(critics=2, max_grad_norm=1.0)
+    assert SACSettings.from_dict(dataclasses.asdict(settings)) == settings
+    with pytest.raises(ValueError, match="unknown"):
+        SACSettings.from_dict({"learning_rate": 1.0})
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_runs_on_cuda_and_matches_the_cpu_initialisation() -> None:
+    cpu, cuda = _agent(), SACAgent(OBS_DIM, ACTION_DIM, len(VOCAB), _agent().settings, device="cuda")
+    assert all(torch.equal(a, b.cpu()) for a, b in zip(cpu.actor.parameters(), cuda.actor.parameters()))
+    metrics = cuda.update(_batch(np.random.default_rng(0)))
+    assert np.isfinite(metrics["critic_loss"])
+    state = cuda.state_dict()
+    assert SACAgent.from_state_dict(state, device="cpu").updates == 1
