@@ -31,21 +31,21 @@ class EnvSnapshot:
     actions: list[list[float]]
 
     def to_dict(self) -> dict[str, Any]:
-        return {"start_state": _stringify(self.start_state), "actions": self.actions}
+        return {"start_state": state_to_json(self.start_state), "actions": self.actions}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> EnvSnapshot:
-        return cls(_unstringify(data["start_state"]), [list(map(float, a)) for a in data["actions"]])
+        return cls(state_from_json(data["start_state"]), [list(map(float, a)) for a in data["actions"]])
 
 
-def _stringify(state: dict[str, Any]) -> dict[str, Any]:
-    """Bit-generator states hold 128-bit integers; JSON readers differ on those, strings do not."""
-    return {k: _stringify(v) if isinstance(v, dict) else (str(v) if isinstance(v, int) else v) for k, v in state.items()}
+def state_to_json(state: dict[str, Any]) -> dict[str, Any]:
+    """A numpy bit-generator state for JSON: its 128-bit integers become strings, which every reader keeps."""
+    return {k: state_to_json(v) if isinstance(v, dict) else (str(v) if isinstance(v, int) else v) for k, v in state.items()}
 
 
-def _unstringify(state: dict[str, Any]) -> dict[str, Any]:
+def state_from_json(state: dict[str, Any]) -> dict[str, Any]:
     return {
-        k: _unstringify(v) if isinstance(v, dict) else (int(v) if isinstance(v, str) and v.lstrip("-").isdigit() else v)
+        k: state_from_json(v) if isinstance(v, dict) else (int(v) if isinstance(v, str) and v.lstrip("-").isdigit() else v)
         for k, v in state.items()
     }
 
@@ -140,10 +140,6 @@ class FinishedEpisode:
     challenge: str
 
 
-def _item(info: dict[str, Any], key: str, i: int) -> Any:
-    return info[key][i]
-
-
 class Collector:
     """Steps N environments together and hands back each episode once it is complete.
 
@@ -170,7 +166,6 @@ class Collector:
         self.task = task
         self._obs, info = self.envs.reset(seed=[seed + i for i in range(n_envs)])
         self._partials = [self._new_partial(info, i) for i in range(n_envs)]
-        self._replayed = restore is not None
 
     @staticmethod
     def _factory(make_env: Callable[[], LanroEnv], snapshot: EnvSnapshot | None) -> Callable[[], TrainingEnv]:
@@ -178,7 +173,7 @@ class Collector:
 
     @staticmethod
     def _new_partial(info: dict[str, Any], i: int) -> _Partial:
-        return _Partial(goal_index=int(_item(info, "goal_index", i)), objects=np.asarray(_item(info, "objects", i)))
+        return _Partial(goal_index=int(info["goal_index"][i]), objects=np.asarray(info["objects"][i]))
 
     @property
     def observation(self) -> dict[str, np.ndarray]:
@@ -245,13 +240,13 @@ class Collector:
             p.actions.append(np.asarray(self._actions[i], dtype=np.float32))
             p.rewards.append(float(rewards[i]))
             p.terminated.append(bool(terminated[i]))
-            p.achieved.append(np.asarray(_item(step_info, "achieved", i), dtype=bool))
+            p.achieved.append(np.asarray(step_info["achieved"][i], dtype=bool))
             if ended:
                 finished.append(
                     FinishedEpisode(
                         p.episode(self.task),
-                        bool(_item(step_info, "is_success", i)),
-                        str(_item(step_info, "challenge", i)),
+                        bool(step_info["is_success"][i]),
+                        str(step_info["challenge"][i]),
                     )
                 )
                 self._partials[i] = self._new_partial(info, i)

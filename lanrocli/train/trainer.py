@@ -31,7 +31,7 @@ from lanrocli.train.checkpoint import (
     save_checkpoint,
     write_pointer,
 )
-from lanrocli.train.collect import Collector
+from lanrocli.train.collect import Collector, state_from_json, state_to_json
 
 EVAL_SEED = 1_000_000
 """Evaluation episodes use seeds from here on, apart from any training seed."""
@@ -230,7 +230,7 @@ class Trainer:
             "train_settings": self.settings.to_dict(),
             "vocabulary": self.vocabulary.to_dict(),
             "progress": dataclasses.asdict(self.progress),
-            "rng": _plain_state(self.rng.bit_generator.state),
+            "rng": state_to_json(self.rng.bit_generator.state),
             "environments": self._collector.snapshots(),
             "wall_time": self.wall_time(),
         }
@@ -252,7 +252,7 @@ class Trainer:
         trainer.agent.load_state_dict(agent_state)
         trainer.buffer = buffer
         trainer.progress = Progress(**state["progress"])
-        trainer.rng.bit_generator.state = _int_state(state["rng"])
+        trainer.rng.bit_generator.state = state_from_json(state["rng"])
         trainer._wall_before = float(state["wall_time"])
         trainer._collector = Collector(
             trainer._make_env, settings.envs, settings.task, settings.seed, restore=state["environments"]
@@ -265,10 +265,3 @@ class Trainer:
             self._collector.close()
             self._collector = None
 
-
-def _plain_state(state: dict[str, Any]) -> dict[str, Any]:
-    return {k: _plain_state(v) if isinstance(v, dict) else (str(v) if isinstance(v, int) else v) for k, v in state.items()}
-
-
-def _int_state(state: dict[str, Any]) -> dict[str, Any]:
-    return {k: _int_state(v) if isinstance(v, dict) else (int(v) if isinstance(v, str) and v.isdigit() else v) for k, v in state.items()}

@@ -125,3 +125,28 @@ def test_pickled_objects_are_refused(tmp_path: Path) -> None:
 def test_missing_checkpoint_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(CheckpointError, match="no checkpoint pointer"):
         Trainer.resume(tmp_path)
+
+
+def test_cuda_request_without_cuda_is_a_clear_error() -> None:
+    from lanrocli.train import pick_device
+
+    assert pick_device("cpu").type == "cpu"
+    assert pick_device(None).type == ("cuda" if torch.cuda.is_available() else "cpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="no CUDA device"):
+            pick_device("cuda")
+
+
+def test_two_environments_in_subprocesses_collect_whole_episodes(tmp_path: Path) -> None:
+    settings = TrainSettings(task="reach", env={"objects": 2}, seed=1, envs=2, eval_every=10**9, learning_starts=10**6)
+    trainer = Trainer(settings, AGENT, tmp_path)
+    trainer.run(240)
+    trainer.close()
+    assert trainer.progress.env_steps == 240 and trainer.progress.episodes >= 4
+    buffer = trainer.buffer
+    starts = np.unique(buffer.data["episode_start"][: buffer.high][buffer.data["valid"][: buffer.high]])
+    for start in starts:
+        length = int(buffer.data["episode_length"][start])
+        obs, next_obs = buffer.data["obs"][start : start + length], buffer.data["next_obs"][start : start + length]
+        # Consecutive transitions chain: no transition spans two episodes.
+        np.testing.assert_array_equal(obs[1:], next_obs[:-1])
