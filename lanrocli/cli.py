@@ -6,7 +6,7 @@ import json
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
@@ -15,6 +15,9 @@ from rich.table import Table
 
 from lanrocli import __version__
 from lanrocli.language import all_sentences, grammar_vocabulary, sample_sentence, sentence_stats
+
+if TYPE_CHECKING:
+    from lanrocli.envs.evaluation import EvaluationReport
 
 app = typer.Typer(
     name="lanro",
@@ -152,7 +155,7 @@ def _percent(rate: float) -> str:
     return "-" if rate != rate else f"{100 * rate:5.1f}%"
 
 
-def _print_report(report: "EvaluationReport", title: str) -> None:  # noqa: F821
+def _print_report(report: EvaluationReport, title: str) -> None:
     table = Table(title=title)
     for column in ("episodes", "", "success", "95% CI"):
         table.add_column(column, justify="right" if column != "" else "left")

@@ -109,6 +109,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._properties = np.zeros((objects, len(COLOURS) + len(SHAPES)), dtype=np.float32)
         self._tokens = np.zeros(self.vocabulary.max_length, dtype=np.int64)
         self._achieved = np.zeros(objects, dtype=bool)
+        self._object_words: tuple[tuple[str, str], ...] = ()
         self._steps = 0
         self._area_low = np.array(OBJECT_AREA.low[:2])
         self._area_high = np.array(OBJECT_AREA.high[:2])
@@ -139,6 +140,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.robot.reset(finger_width=0.08 if self.task.gripper else 0.0)
         self._start_positions = np.array(self.objects.states().positions)
         self._heights = np.array([SIM_SHAPES[o.shape].height for o in scene.objects])
+        self._object_words = tuple((o.colour, o.shape) for o in scene.objects)
         self._properties[:] = 0.0
         for k, obj in enumerate(scene.objects):
             self._properties[k, COLOURS.index(obj.colour)] = 1.0
@@ -204,7 +206,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "achieved": self._achieved.copy(),
             "goal_index": self._scene.goal_index,
             "object_positions": np.array(self.objects.states().positions),
-            "objects": tuple((o.colour, o.shape) for o in self._scene.objects),
+            "objects": self._object_words,
             "instruction_text": self.instructor.text,
             "challenge": None if self.instructor.challenge is None else self.instructor.challenge.value,
             "correction": None if spoken is None else spoken.as_info(),

@@ -29,6 +29,7 @@ from lanrocli.language import (
     identifying_phrases,
     instruction,
     object_phrases,
+    pick,
 )
 from lanrocli.envs.scene import Scene
 
@@ -95,10 +96,6 @@ class Correction:
         }
 
 
-def _pick(rng: np.random.Generator, items: Sequence):  # type: ignore[no-untyped-def]
-    return items[int(rng.integers(len(items)))]
-
-
 def _matching(phrase: Phrase, objects: Sequence[ObjectProps]) -> set[int]:
     return {i for i, o in enumerate(objects) if phrase.matches(o)}
 
@@ -128,7 +125,7 @@ class Instructor:
     def draw_challenge(self, rng: np.random.Generator) -> Kind | None:
         """Whether the next episode is a correction episode, and of which kind (drawn before the scene)."""
         if self.settings.correction_rate > 0 and rng.random() < self.settings.correction_rate:
-            return _pick(rng, self.settings.active_kinds)
+            return pick(rng, self.settings.active_kinds)
         return None
 
     def start(self, rng: np.random.Generator, scene: Scene, challenge: Kind | None) -> None:
@@ -140,14 +137,14 @@ class Instructor:
         elif challenge is Kind.COMMON_GROUND:
             phrases = [p for p in identifying_phrases(goal, others, rare=True) if p.rare]
         elif challenge is Kind.INSTRUCTION_CORRECTION:
-            named = _pick(rng, [i for i in range(len(scene.objects)) if i != scene.goal_index])
+            named = pick(rng, [i for i in range(len(scene.objects)) if i != scene.goal_index])
             phrases = identifying_phrases(scene.objects[named], scene.others(named))
         else:
             phrases = identifying_phrases(goal, others)
         if not phrases:
             raise RuntimeError(f"no {challenge or 'plain'} instruction exists for goal {goal} among {others}")
-        self._phrase = _pick(rng, phrases)
-        self.instruction_text = instruction(_pick(rng, TASK_VERBS[self.task]), self._phrase)
+        self._phrase = pick(rng, phrases)
+        self.instruction_text = instruction(pick(rng, TASK_VERBS[self.task]), self._phrase)
 
     def observe(self, rng: np.random.Generator, step: int, achieved: np.ndarray) -> bool:
         """Watch the state after ``step``; return True when the goal sentence changed at this step."""
@@ -158,7 +155,7 @@ class Instructor:
             wrong = wrong[wrong != self._scene.goal_index]
             if wrong.size == 0:
                 return False
-            self._trigger = (step, int(_pick(rng, wrong)))
+            self._trigger = (step, int(pick(rng, wrong)))
         triggered_at, touched = self._trigger
         if step < triggered_at + self._delay:
             return False
@@ -181,13 +178,13 @@ class Instructor:
         assert self._scene is not None and self.challenge is not None
         objects, goal = self._scene.objects, self._scene.goal_index
         candidates = self._candidates()
-        kind = _pick(rng, beginning_kinds(self.settings.negations))
+        kind = pick(rng, beginning_kinds(self.settings.negations))
         if kind is Beginning.NEGATION:
             negations = [p for p in object_phrases(objects[touched]) if candidates - _matching(p, objects) == {goal}]
             if negations:
-                text = correction("not", _pick(rng, negations))
+                text = correction("not", pick(rng, negations))
                 return Correction(self.challenge, True, text, step, triggered_at)
-            kind = _pick(rng, (Beginning.EXCUSE, Beginning.EDIT))
+            kind = pick(rng, (Beginning.EXCUSE, Beginning.EDIT))
         naming = [p for p in object_phrases(objects[goal]) if candidates & _matching(p, objects) == {goal}]
-        text = correction(_pick(rng, BEGINNING_WORDS[kind]), _pick(rng, naming))
+        text = correction(pick(rng, BEGINNING_WORDS[kind]), pick(rng, naming))
         return Correction(self.challenge, False, text, step, triggered_at)

@@ -20,6 +20,7 @@ from lanrocli.language.grammar import (
     identifying_phrases,
     instruction,
     object_phrases,
+    pick,
     sample_sentence,
     sentence_stats,
 )
@@ -65,6 +66,7 @@ __all__ = [
     "identifying_phrases",
     "instruction",
     "object_phrases",
+    "pick",
     "sample_sentence",
     "sentence_stats",
 ]

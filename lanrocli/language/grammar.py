@@ -190,28 +190,29 @@ def all_sentences(task: str, corrections: bool = False, negations: bool = False,
             yield Sentence(text, ctext, form, kind)
 
 
-def _pick(rng: np.random.Generator, items: Sequence):  # type: ignore[no-untyped-def]
+def pick(rng: np.random.Generator, items: Sequence):  # type: ignore[no-untyped-def]
+    """A uniform choice that keeps the element as it is (``rng.choice`` turns tuples and enums into arrays)."""
     return items[int(rng.integers(len(items)))]
 
 
 def sample_phrase(rng: np.random.Generator, rare: bool = False) -> Phrase:
     """A random OBJECT: uniform over forms, then over the objects and words that form allows."""
-    form = _pick(rng, tuple(Form))
-    obj = ObjectProps(_pick(rng, COLOURS), _pick(rng, SHAPES))
-    return _pick(rng, object_phrases(obj, rare, (form,)))
+    form = pick(rng, tuple(Form))
+    obj = ObjectProps(pick(rng, COLOURS), pick(rng, SHAPES))
+    return pick(rng, object_phrases(obj, rare, (form,)))
 
 
 def sample_sentence(
     rng: np.random.Generator, task: str, corrections: bool = False, negations: bool = False, rare: bool = False
 ) -> Sentence:
     """A random sentence from the grammar, ignoring any scene: for inspecting what the instructor can say."""
-    verb = _pick(rng, TASK_VERBS[check_task(task)])
+    verb = pick(rng, TASK_VERBS[check_task(task)])
     phrase = sample_phrase(rng, rare)
     text = instruction(verb, phrase)
     if not corrections:
         return Sentence(text, None, phrase.form)
-    kind = _pick(rng, beginning_kinds(negations))
-    ctext = correction(_pick(rng, BEGINNING_WORDS[kind]), sample_phrase(rng, rare=False))
+    kind = pick(rng, beginning_kinds(negations))
+    ctext = correction(pick(rng, BEGINNING_WORDS[kind]), sample_phrase(rng, rare=False))
     return Sentence(text, ctext, phrase.form, kind)
 
 

@@ -121,6 +121,7 @@ def load_checkpoint(directory: Path, device: str | torch.device = "cpu") -> tupl
 
 def prune(directory: Path, keep: set[Path]) -> None:
     """Remove checkpoint directories under ``directory`` except ``keep``, and stale temporary ones."""
+    kept = {k.resolve() for k in keep}
     for child in directory.iterdir():
-        if child.is_dir() and child.resolve() not in {k.resolve() for k in keep}:
+        if child.is_dir() and child.resolve() not in kept:
             shutil.rmtree(child, ignore_errors=True)

@@ -58,6 +58,7 @@ class TrainingEnv(gym.Wrapper):
         self._restore = restore
         self._start_state: dict[str, Any] = {}
         self._actions: list[list[float]] = []
+        self._objects = np.zeros((0, 2), dtype=np.int64)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):  # type: ignore[override]
         if self._restore is not None:
@@ -68,7 +69,7 @@ class TrainingEnv(gym.Wrapper):
         self._start_state = dict(self.unwrapped.np_random.bit_generator.state)
         self._actions = []
         obs, info = self.env.reset(options=options)
-        return obs, self._flat(info)
+        return obs, self._flat_reset(info)
 
     def step(self, action: np.ndarray):  # type: ignore[override]
         self._actions.append(np.asarray(action, dtype=np.float64).tolist())
@@ -85,18 +86,21 @@ class TrainingEnv(gym.Wrapper):
         self._start_state = dict(snapshot.start_state)
         self._actions = []
         obs, info = self.env.reset()
-        flat = self._flat(info)
+        flat = self._flat_reset(info)
         for action in snapshot.actions:
             obs, _, _, _, flat = self.step(np.asarray(action))
         return obs, flat
 
-    @staticmethod
-    def _flat(info: dict[str, Any]) -> dict[str, Any]:
-        objects = np.array([(COLOURS.index(c), SHAPES.index(s)) for c, s in info["objects"]], dtype=np.int64)
+    def _flat_reset(self, info: dict[str, Any]) -> dict[str, Any]:
+        """The objects stay the same all episode: turn their words into indices once."""
+        self._objects = np.array([(COLOURS.index(c), SHAPES.index(s)) for c, s in info["objects"]], dtype=np.int64)
+        return self._flat(info)
+
+    def _flat(self, info: dict[str, Any]) -> dict[str, Any]:
         return {
             "achieved": np.asarray(info["achieved"], dtype=bool),
             "goal_index": int(info["goal_index"]),
-            "objects": objects,
+            "objects": self._objects,
             "is_success": bool(info["is_success"]),
             "challenge": info["challenge"] or "",
         }

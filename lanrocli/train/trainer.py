@@ -36,6 +36,9 @@ from lanrocli.train.collect import Collector, state_from_json, state_to_json
 EVAL_SEED = 1_000_000
 """Evaluation episodes use seeds from here on, apart from any training seed."""
 
+SUCCESS_WINDOW = 100
+"""Training episodes over which the reported training success is averaged."""
+
 CHECKPOINTS = "checkpoints"
 METRICS = "metrics.csv"
 
@@ -173,7 +176,8 @@ class Trainer:
                 self.buffer.add_episode(episode.data)
                 self.agent.update_normalizer(episode.data.observations)
                 self.progress.episodes += 1
-                self.progress.train_successes = (self.progress.train_successes + [episode.success])[-100:]
+                self.progress.train_successes.append(episode.success)
+                del self.progress.train_successes[:-SUCCESS_WINDOW]
             before = self.progress.env_steps
             self.progress.env_steps += s.envs
             if on_step is not None:
@@ -244,8 +248,7 @@ class Trainer:
         """The run in ``out``, exactly as its latest checkpoint left it."""
         directory = read_pointer(out / LATEST)
         agent_state, buffer, state, partials = load_checkpoint(directory, device)
-        raw = state["train_settings"]
-        settings = TrainSettings(**{**raw, "env": raw["env"]})
+        settings = TrainSettings(**state["train_settings"])
         trainer = cls(settings, SACSettings.from_dict(agent_state["settings"]), out, device)
         if trainer.vocabulary.to_dict() != state["vocabulary"]:
             raise CheckpointError(f"{directory} was written with another vocabulary than this version of lanro's")
