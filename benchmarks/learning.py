@@ -1,28 +1,69 @@
-"""Learning speed: train reach with 2 objects (colour mode) from scratch and write success vs environment
-steps to CSV; the second setting adds correction episodes (``correction_rate=0.5``).
+"""Learning speed: train reach with 2 objects (colour mode) from scratch and write success against
+environment steps to CSV; the second setting adds correction episodes (``correction_rate=0.5``).
 
     python benchmarks/learning.py plain --steps 300000 --out runs/learning-plain
     python benchmarks/learning.py corrections --steps 1000000 --out runs/learning-corrections
 
-The CSV (``metrics.csv`` in ``--out``) gets one row per evaluation: environment steps, wall time, success on
-fixed evaluation episodes (deterministic policy), success on correction episodes, losses. The run is
-checkpointed at every evaluation and continues with ``--resume`` after a crash or kill.
+Each setting is a one-stage curriculum run by the same pipeline as ``lanro train``, so ``--out`` is a run
+folder: ``metrics.csv`` gets one row per evaluation (environment steps, wall time, success on fixed
+evaluation episodes with the deterministic policy, success on correction episodes, losses), ``lanro plot``
+draws it, and ``--resume`` continues it after a crash or kill. ``--target`` ends the run once the
+evaluation success (on correction episodes, for the second setting) reaches it.
 """
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import torch
 
 from lanrocli.agent import SACSettings
-from lanrocli.train import Trainer, TrainSettings, pick_device
+from lanrocli.train import pick_device
+from lanrocli.train.curriculum import Curriculum
+from lanrocli.train.pipeline import CurriculumRun, RunObserver
 
 SETTINGS = {
     "plain": {"objects": 2, "mode": "color", "correction_rate": 0.0},
     "corrections": {"objects": 2, "mode": "color", "correction_rate": 0.5},
 }
+
+
+def curriculum(setting: str, steps: int, seed: int, envs: int, every: int, episodes: int, target: float | None,
+               agent: dict[str, Any]) -> Curriculum:
+    stage: dict[str, Any] = {"name": setting, "env": SETTINGS[setting], "budget": {"steps": steps}}
+    if target is not None:
+        stage["promote"] = {"success": target, "on": "corrections" if setting == "corrections" else "overall"}
+    return Curriculum.model_validate(
+        {
+            "name": f"learning-{setting}",
+            "task": "reach",
+            "seed": seed,
+            "envs": envs,
+            "agent": agent,
+            "eval": {"every": every, "episodes": episodes},
+            "stages": [stage],
+        }
+    )
+
+
+def agent_overrides(pairs: list[str]) -> dict[str, str]:
+    """``NAME=VALUE`` pairs; the curriculum's validation converts and checks the values."""
+    known = SACSettings().to_dict()
+    overrides = {}
+    for pair in pairs:
+        name, _, value = pair.partition("=")
+        if name not in known:
+            raise SystemExit(f"--agent: unknown setting {name!r}; known: {', '.join(sorted(known))}")
+        overrides[name] = value
+    return overrides
+
+
+class Printer(RunObserver):
+    def on_evaluation(self, run: CurriculumRun, row: dict[str, Any]) -> None:
+        extra = f", corrections {row['correction_success']:.2f}" if row["correction_success"] != "" else ""
+        print(f"{row['env_steps']} steps, {row['wall_time']:.0f} s: success {row['success']:.2f}{extra}", flush=True)
 
 
 def main() -> None:
@@ -38,37 +79,27 @@ def main() -> None:
     parser.add_argument("--device", choices=["cpu", "cuda"], help="default: cuda if available, else cpu")
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
+    parser.add_argument(
+        "--agent", nargs="*", default=[], metavar="NAME=VALUE", help="agent settings, e.g. critics=2 (default: the paper's)"
+    )
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     device = pick_device(args.device)
-
+    plan = curriculum(
+        args.setting, args.steps, args.seed, args.envs, args.eval_every, args.eval_episodes, args.target,
+        agent_overrides(args.agent),
+    )
     if args.resume:
-        trainer = Trainer.resume(args.out, device)
+        run = CurriculumRun.resume(args.out, plan, device, Printer())
     else:
-        settings = TrainSettings(
-            task="reach",
-            env=SETTINGS[args.setting],
-            seed=args.seed,
-            envs=args.envs,
-            eval_every=args.eval_every,
-            eval_episodes=args.eval_episodes,
-        )
-        trainer = Trainer(settings, SACSettings(), args.out, device)
-
-    def report(t: Trainer, evaluation) -> None:  # type: ignore[no-untyped-def]
-        corrections = evaluation.corrections
-        extra = f", corrections {corrections.success:.2f}" if corrections.episodes else ""
-        print(f"{t.progress.env_steps} steps, {t.wall_time():.0f} s: success {evaluation.overall.success:.2f}{extra}", flush=True)
-        if args.target is not None:
-            key = evaluation.corrections if args.setting == "corrections" else evaluation.overall
-            if key.episodes and key.success >= args.target:
-                reached.append(t.progress.env_steps)
-
-    reached: list[int] = []
-    trainer.run(args.steps, should_stop=lambda: bool(reached), on_evaluation=report)
-    trainer.close()
-    if reached:
-        print(f"target reached at {reached[0]} environment steps")
+        run = CurriculumRun.start(plan, args.out, device, Printer())
+    try:
+        run.run()
+    finally:
+        run.close()
+    result = run.state.results[-1]
+    if result.ended == "promoted":
+        print(f"target reached at {result.end} environment steps, {result.wall_time:.0f} s")
 
 
 if __name__ == "__main__":

@@ -13,10 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
-import tempfile
 import time
-from pathlib import Path
 
 import torch
 
@@ -43,11 +40,8 @@ class Stopwatch:
 
 
 def run_ours(steps: int, envs: int, learning_starts: int, seed: int) -> dict[str, float]:
-    out = Path(tempfile.mkdtemp(prefix="lanro-bench-"))
-    settings = TrainSettings(
-        task="reach", env={"objects": 2}, seed=seed, envs=envs, eval_every=10**9, learning_starts=learning_starts
-    )
-    trainer = Trainer(settings, SACSettings(batch_size=256, updates_per_step=1), out)
+    settings = TrainSettings(task="reach", env={"objects": 2}, seed=seed, envs=envs, learning_starts=learning_starts)
+    trainer = Trainer(settings, SACSettings(batch_size=256, updates_per_step=1))
     simulation, sampling, updating = Stopwatch(), Stopwatch(), Stopwatch()
     trainer.run(envs)  # start the environments before the clock
     collector = trainer._collector
@@ -60,7 +54,6 @@ def run_ours(steps: int, envs: int, learning_starts: int, seed: int) -> dict[str
     trainer.run(steps)
     total = time.perf_counter() - start
     trainer.close()
-    shutil.rmtree(out, ignore_errors=True)
     done = steps - envs
     return {
         "env_steps_per_s": done / total,

@@ -18,6 +18,7 @@ from lanrocli.language import all_sentences, grammar_vocabulary, sample_sentence
 
 if TYPE_CHECKING:
     from lanrocli.envs.evaluation import EvaluationReport
+    from lanrocli.train.curriculum import Curriculum
 
 app = typer.Typer(
     name="lanro",
@@ -28,7 +29,7 @@ app = typer.Typer(
 )
 
 
-err_console = Console(stderr=True)
+err_console = Console(stderr=True, soft_wrap=True)
 
 
 def fail(message: str, code: int = 2) -> typer.Exit:
@@ -170,53 +171,246 @@ def _print_report(report: EvaluationReport, title: str) -> None:
     Console().print(f"mean episode length {report.mean_length:.1f} steps, mean return {report.mean_return:.1f}")
 
 
+def _env_summary(env: dict[str, object]) -> str:
+    parts = [f"{env['objects']} objects", str(env["mode"])]
+    if env["correction_rate"]:
+        parts.append(f"corrections {env['correction_rate']:g}")
+        if env.get("negations"):
+            parts.append("negations")
+        if env.get("max_delay"):
+            parts.append(f"delay <= {env['max_delay']}")
+        if env.get("rare_words"):
+            parts.append("rare words")
+        if env.get("kinds"):
+            parts.append("kinds " + ",".join(env["kinds"]))  # type: ignore[arg-type]
+    return ", ".join(parts)
+
+
 @app.command("eval")
 def evaluate_command(
-    policy: Annotated[PolicyName, typer.Argument(help="Scripted policy to evaluate: oracle, mistaken or random.")],
-    task: Annotated[TaskName, typer.Option(help="Task to evaluate on.")] = TaskName.reach,
-    objects: Annotated[int, typer.Option(min=2, max=3, help="Objects on the table (2 or 3).")] = 2,
-    mode: Annotated[ModeName, typer.Option(help="Which properties vary between objects.")] = ModeName.color,
+    what: Annotated[
+        str,
+        typer.Argument(
+            metavar="POLICY_OR_CHECKPOINT",
+            help="A scripted policy (oracle, mistaken, random), or a trained agent: a checkpoint directory, a "
+            "pointer such as RUN/stage-2-corrections/best, or a run folder (its latest checkpoint).",
+        ),
+    ],
+    task: Annotated[TaskName | None, typer.Option(help="Task (scripted policies; default reach).")] = None,
+    objects: Annotated[int | None, typer.Option(min=2, max=3, help="Objects on the table (2 or 3).")] = None,
+    mode: Annotated[ModeName | None, typer.Option(help="Which properties vary between objects.")] = None,
     correction_rate: Annotated[
-        float, typer.Option(min=0.0, max=1.0, help="Share of correction episodes (0 = plain instructions).")
-    ] = 0.0,
-    negations: Annotated[bool, typer.Option("--negations", help="Allow negating corrections.")] = False,
-    max_delay: Annotated[int, typer.Option(min=0, help="Corrections arrive after 0..MAX_DELAY steps.")] = 0,
-    rare_words: Annotated[bool, typer.Option("--rare-words", help="Allow rare colour words (common ground).")] = False,
+        float | None, typer.Option(min=0.0, max=1.0, help="Share of correction episodes (0 = plain instructions).")
+    ] = None,
+    negations: Annotated[
+        bool | None, typer.Option("--negations/--no-negations", help="Allow negating corrections.")
+    ] = None,
+    max_delay: Annotated[int | None, typer.Option(min=0, help="Corrections arrive after 0..MAX_DELAY steps.")] = None,
+    rare_words: Annotated[
+        bool | None, typer.Option("--rare-words/--no-rare-words", help="Allow rare colour words (common ground).")
+    ] = None,
     kinds: Annotated[
         str | None,
         typer.Option(help="Comma-separated kinds: ambiguity,common_ground,instruction_correction,wrong_object."),
     ] = None,
     episodes: Annotated[int, typer.Option(min=1, help="Number of episodes.")] = 100,
     seed: Annotated[int, typer.Option(min=0, help="Episode i uses seed SEED + i.")] = 0,
+    device: Annotated[str | None, typer.Option(help="cpu or cuda for a trained agent (default: cuda if available).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
     gif: Annotated[Path | None, typer.Option(help="Write the first episodes as an animated GIF here.")] = None,
 ) -> None:
-    """Evaluate a policy: success overall, on correction episodes, per kind, with 95% intervals."""
+    """Evaluate a scripted policy or a trained agent: success overall, on correction episodes, per kind, with 95%
+    intervals. For a checkpoint, the environment defaults to the stage it was trained on; options change it."""
     from lanrocli.envs import LanroEnv
     from lanrocli.envs.evaluation import evaluate
     from lanrocli.envs.policies import make_policy
 
+    given = {
+        "objects": objects,
+        "mode": None if mode is None else mode.value,
+        "correction_rate": correction_rate,
+        "negations": negations,
+        "max_delay": max_delay,
+        "rare_words": rare_words,
+        "kinds": None if kinds is None else [k.strip() for k in kinds.split(",") if k.strip()],
+    }
+    overrides = {k: v for k, v in given.items() if v is not None}
+    if what in {p.value for p in PolicyName}:
+        task_name = (task or TaskName.reach).value
+        env_settings = {"objects": 2, "mode": "color", "correction_rate": 0.0, **overrides}
+        slots, label = None, what
+        policy = make_policy(what, task_name)
+    else:
+        task_name, env_settings, slots, policy = _load_agent_policy(Path(what), task, overrides, device)
+        label = what
     try:
-        env = LanroEnv(
-            task=task.value,
-            objects=objects,
-            mode=mode.value,
-            correction_rate=correction_rate,
-            negations=negations,
-            max_delay=max_delay,
-            rare_words=rare_words,
-            kinds=None if kinds is None else [k.strip() for k in kinds.split(",") if k.strip()],
-            render_mode="rgb_array" if gif else None,
-        )
+        env = LanroEnv(task=task_name, object_slots=slots, render_mode="rgb_array" if gif else None, **env_settings)
     except ValueError as error:
         raise fail(f"{error} (see 'lanro eval --help')") from None
     try:
-        report = evaluate(env, make_policy(policy.value, task.value), episodes, seed, gif)
+        report = evaluate(env, policy, episodes, seed, gif)
     finally:
         env.close()
     if as_json:
-        typer.echo(json.dumps({"policy": policy.value, "task": task.value, **report.as_dict()}))
+        typer.echo(json.dumps({"policy": label, "task": task_name, "env": env_settings, **report.as_dict()}))
         return
-    _print_report(report, f"{policy.value} on {task.value}, {objects} objects, {mode.value}, seed {seed}")
+    summary = _env_summary({"mode": "color", "correction_rate": 0.0, **env_settings})
+    _print_report(report, f"{label} on {task_name}, {summary}, seed {seed}")
     if gif:
         Console().print(f"wrote {gif}")
+
+
+def _load_agent_policy(
+    path: Path, task: TaskName | None, overrides: dict[str, object], device: str | None
+) -> tuple[str, dict[str, object], int, object]:
+    """Task, environment settings, object slots and deterministic policy of the agent saved at ``path``."""
+    from lanrocli.agent import SACAgent
+    from lanrocli.train import CheckpointError, pick_device
+    from lanrocli.train.checkpoint import load_agent_state, load_state, resolve_checkpoint
+    from lanrocli.train.trainer import AgentPolicy, TrainSettings
+
+    if not path.exists():
+        raise fail(f"{path} is neither a scripted policy (oracle, mistaken, random) nor an existing checkpoint path")
+    try:
+        directory = resolve_checkpoint(path)
+        settings = TrainSettings(**load_state(directory)["train_settings"])
+        agent = SACAgent.from_state_dict(load_agent_state(directory, pick_device(device)), pick_device(device))
+    except (CheckpointError, ValueError, KeyError) as error:
+        raise fail(f"cannot load a trained agent from {path}: {error}") from None
+    if task is not None and task.value != settings.task:
+        raise fail(f"{directory} was trained on {settings.task}; it cannot be evaluated on {task.value}")
+    env_settings = {**settings.env, **overrides}
+    if int(env_settings.get("objects", 2)) > settings.slots:  # type: ignore[call-overload]
+        raise fail(f"{directory} observes at most {settings.slots} objects; --objects must not exceed that")
+    return settings.task, env_settings, settings.slots, AgentPolicy(agent)
+
+
+@app.command("check")
+def check_command(
+    curriculum: Annotated[Path, typer.Argument(help="Curriculum YAML file to validate.")],
+    quick: Annotated[bool, typer.Option("--quick", help="Show the plan --quick would run.")] = False,
+) -> None:
+    """Validate a curriculum and print the resolved plan (stages, budgets, total steps) without training."""
+    plan = _load_plan(curriculum, quick, None, None)
+    _print_plan(plan)
+
+
+def _load_plan(path: Path | None, quick: bool, seed: int | None, envs: int | None) -> Curriculum:
+    """The curriculum to run: from ``path`` or the built-in one, scaled by --quick, with overrides."""
+    from lanrocli.train.curriculum import CurriculumError, builtin_curriculum, load_curriculum
+
+    try:
+        plan = load_curriculum(path) if path is not None else builtin_curriculum()
+    except CurriculumError as error:
+        count = len(error.problems)
+        raise fail(f"{count} problem{'s' if count > 1 else ''} in the curriculum:\n{error}") from None
+    if quick:
+        plan = plan.quick()
+    return plan.with_overrides(seed=seed, envs=envs)
+
+
+def _print_plan(plan: Curriculum) -> None:
+    from lanrocli.agent import SACSettings
+
+    console = Console()
+    table = Table(title=f"{plan.name}: {plan.task}, seed {plan.seed}, {plan.envs} environments")
+    for column in ("stage", "environment", "budget", "promotion", "when the budget runs out"):
+        table.add_column(column)
+    for i, stage in enumerate(plan.stages):
+        rule = "-"
+        if stage.promote is not None:
+            rule = f"{stage.promote.on} success >= {stage.promote.success:g} on {stage.promote.patience} evaluation(s)"
+        table.add_row(
+            f"{i + 1}. {stage.name}",
+            _env_summary(stage.env.model_dump()),
+            f"{stage.budget.steps:,} steps",
+            rule,
+            stage.on_budget,
+        )
+    console.print(table)
+    changed = {k: v for k, v in plan.agent.settings().to_dict().items() if SACSettings().to_dict()[k] != v}
+    console.print(f"at most {plan.total_steps:,} environment steps in all")
+    console.print(f"evaluation: {plan.eval.episodes} episodes every {plan.eval.every:,} steps of a stage, and at its end")
+    console.print(f"agent: default settings (SACSettings){', except ' + str(changed) if changed else ''}")
+
+
+@app.command("train")
+def train_command(
+    curriculum: Annotated[
+        Path | None,
+        typer.Argument(help="Curriculum YAML file. Optional with --quick (a built-in one) and with --resume."),
+    ] = None,
+    out: Annotated[Path | None, typer.Option(help="Run folder (default: checkpoints/<curriculum name>).")] = None,
+    seed: Annotated[int | None, typer.Option(min=0, help="Override the curriculum's seed.")] = None,
+    envs: Annotated[int | None, typer.Option(min=1, max=64, help="Override the number of parallel environments.")] = None,
+    device: Annotated[str | None, typer.Option(help="cpu or cuda (default: cuda if available).")] = None,
+    resume: Annotated[bool, typer.Option("--resume", help="Continue the run in --out where it stopped.")] = False,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="Scale every budget and evaluation down to a run of a few minutes.")
+    ] = False,
+) -> None:
+    """Train an agent through a curriculum of stages, with evaluation, checkpoints and resume."""
+    import torch
+
+    from lanrocli.display import StopRequest, TrainingDisplay
+    from lanrocli.train import pick_device
+    from lanrocli.train.curriculum import CurriculumError
+    from lanrocli.train.pipeline import CurriculumRun, RunError
+
+    if curriculum is None and not quick and not resume:
+        raise fail("give a curriculum file (e.g. curricula/reach.yaml), or --quick for the built-in one")
+    plan = None if curriculum is None and resume and not quick else _load_plan(curriculum, quick, seed, envs)
+    if out is None:
+        if plan is None:
+            raise fail("--resume without a curriculum file needs --out: the run folder to continue")
+        out = Path("checkpoints") / plan.name
+    try:
+        torch_device = pick_device(device)
+    except ValueError as error:
+        raise fail(str(error)) from None
+    torch.set_num_threads(1 if torch_device.type == "cpu" else torch.get_num_threads())
+    display = TrainingDisplay.for_terminal()
+    try:
+        if resume:
+            run = CurriculumRun.resume(out, plan, torch_device, display)
+        else:
+            assert plan is not None
+            run = CurriculumRun.start(plan, out, torch_device, display)
+    except (RunError, CurriculumError) as error:
+        raise fail(str(error)) from None
+    if run.state.finished:
+        Console().print(f"the run in {out} has finished already; see {out / 'report.md'}")
+        return
+    resume_hint = "lanro train " + (f"{curriculum} " if curriculum else "") + ("--quick " if quick else "") + f"--out {out} --resume"
+    with StopRequest() as stop:
+        try:
+            with display:
+                finished = run.run(should_stop=stop.requested)
+        finally:
+            run.close()
+    console = display.console
+    if not finished:
+        console.print(f"stopped at {run.trainer.progress.env_steps:,} environment steps; checkpoint written.")
+        console.print(f"resume with: {resume_hint}")
+        raise typer.Exit(130)
+    from rich.markdown import Markdown
+
+    report = (out / "report.md").read_text()
+    console.print(Markdown(report) if console.is_terminal else report, markup=False)
+    console.print(f"run folder: {out}   evaluate: lanro eval {out}   plot: lanro plot {out} --out curves.png")
+
+
+@app.command("plot")
+def plot_command(
+    runs: Annotated[list[Path], typer.Argument(help="Run folders (several seeds are drawn as mean and band).")],
+    out: Annotated[Path, typer.Option(help="Image to write (.png, .svg or .pdf).")] = Path("curves.png"),
+    title: Annotated[str | None, typer.Option(help="Figure title (default: the run names).")] = None,
+) -> None:
+    """Plot success against environment steps, overall and on correction episodes, with stage boundaries."""
+    from lanrocli.train.plot import plot_runs
+
+    try:
+        path = plot_runs(runs, out, title)
+    except (FileNotFoundError, ValueError) as error:
+        raise fail(str(error)) from None
+    Console().print(f"wrote {path}")

@@ -115,3 +115,60 @@ def test_eval_writes_a_gif(tmp_path) -> None:
     gif = tmp_path / "episodes.gif"
     result = runner.invoke(app, ["eval", "oracle", "--episodes", "1", "--gif", str(gif)])
     assert result.exit_code == 0 and gif.stat().st_size > 1000
+
+
+def test_quick_training_run_then_eval_plot_and_refusals(tmp_path) -> None:
+    """The README's first command, on the built-in curriculum, and what can be done with its run folder."""
+    out = tmp_path / "run"
+    result = runner.invoke(app, ["train", "--quick", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    for name in ("config.yaml", "metrics.csv", "report.md", "latest"):
+        assert (out / name).is_file()
+    for stage in ("stage-1-single", "stage-2-corrections", "stage-3-negations"):
+        assert (out / stage / "best").is_file() and (out / stage / "last").is_file()
+    assert "Status: finished" in (out / "report.md").read_text()
+
+    evaluated = runner.invoke(app, ["eval", str(out), "--episodes", "3", "--json"])
+    assert evaluated.exit_code == 0, evaluated.output
+    report = json.loads(evaluated.output)
+    assert report["episodes"] == 3 and report["env"]["objects"] == 3 and report["env"]["negations"] is True
+    best = runner.invoke(app, ["eval", str(out / "stage-1-single" / "best"), "--episodes", "2"])
+    assert best.exit_code == 0 and "2 objects, color" in best.output
+    assert runner.invoke(app, ["eval", str(out), "--task", "push"]).exit_code == 2
+
+    plot = runner.invoke(app, ["plot", str(out), "--out", str(tmp_path / "curves.png")])
+    assert plot.exit_code == 0 and (tmp_path / "curves.png").stat().st_size > 10_000
+
+    again = runner.invoke(app, ["train", "--quick", "--out", str(out)])
+    assert again.exit_code == 2 and "--resume" in again.output
+    changed = runner.invoke(app, ["train", "--quick", "--out", str(out), "--resume", "--seed", "7"])
+    assert changed.exit_code == 2 and "-seed: 0" in changed.output and "+seed: 7" in changed.output
+    finished = runner.invoke(app, ["train", "--quick", "--out", str(out), "--resume"])
+    assert finished.exit_code == 0 and "finished already" in finished.output
+
+
+def test_every_shipped_curriculum_checks(tmp_path) -> None:
+    from pathlib import Path
+
+    files = sorted(Path(__file__).parents[1].joinpath("curricula").glob("*.yaml"))
+    assert {f.stem for f in files} >= {"reach", "push", "grasp", "lift"}
+    for path in files:
+        result = runner.invoke(app, ["check", str(path)])
+        assert result.exit_code == 0, result.output
+        assert "environment steps in all" in result.output
+
+
+def test_check_reports_every_problem_with_its_place_and_exits_2(tmp_path) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(
+        "name: bad\ntask: reach\nstages:\n  - name: one\n    env: {objects: 2, corection_rate: 0.5}\n"
+        "    budget: {steps: 100}\n  - name: two\n    env: {correction_rate: 1.5}\n    budget: {steps: -1}\n"
+    )
+    result = runner.invoke(app, ["check", str(path)])
+    assert result.exit_code == 2
+    assert "3 problems" in result.output
+    assert f"{path}:5: stages[0].env.corection_rate" in result.output and "did you mean 'correction_rate'" in result.output
+    assert f"{path}:8: stages[1].env.correction_rate" in result.output
+    assert f"{path}:9: stages[1].budget.steps" in result.output
+    missing = runner.invoke(app, ["train"])
+    assert missing.exit_code == 2 and "--quick" in missing.output

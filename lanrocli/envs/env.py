@@ -35,7 +35,9 @@ def observation_size(n_objects: int) -> int:
 class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     """A Panda on a table with 2 or 3 objects and an instructor that speaks, watches and corrects.
 
-    Observation ``{"observation": float32[N], "instruction": int64[L]}`` with N = 7 + 25 n:
+    Observation ``{"observation": float32[N], "instruction": int64[L]}`` with N = 7 + 25 ``object_slots``
+    (by default the number of objects; a curriculum whose stages differ in objects gives every stage the
+    largest number, so one network reads them all, and the slots without an object are zeros):
 
     - ``[0:3]`` end-effector position (m), ``[3:6]`` its velocity (m/s), ``[6]`` finger width (m);
     - per object k (in the order of ``info["objects"]``), from ``7 + 25 k``: position (3), orientation
@@ -62,11 +64,15 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         rare_words: bool = False,
         kinds: Sequence[str] | None = None,
         max_episode_steps: int | None = None,
+        object_slots: int | None = None,
         render_mode: str | None = None,
         gui: bool = False,
     ) -> None:
         if objects not in (2, 3):
             raise ValueError(f"objects must be 2 or 3, got {objects!r}")
+        slots = objects if object_slots is None else object_slots
+        if slots < objects:
+            raise ValueError(f"object_slots ({slots}) must be at least objects ({objects})")
         try:
             self.mode = Mode(mode)
         except ValueError:
@@ -84,10 +90,11 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             kinds=tuple(Kind) if kinds is None else tuple(kinds),
         )
         self.n_objects = objects
+        self.object_slots = slots
         self.render_mode = render_mode
         self.max_episode_steps = max_episode_steps or (CORRECTION_LIMIT if correction_rate > 0 else PLAIN_LIMIT)
         self.vocabulary = grammar_vocabulary()
-        n = observation_size(objects)
+        n = observation_size(slots)
         self.observation_space = gym.spaces.Dict(
             {
                 "observation": gym.spaces.Box(-np.inf, np.inf, shape=(n,), dtype=np.float32),
@@ -193,8 +200,9 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             ],
             axis=1,
         )
+        empty = np.zeros((self.object_slots - self.n_objects) * OBJECT_SIZE)
         observation = np.concatenate(
-            [robot.ee_position, robot.ee_velocity, [robot.finger_width], per_object.ravel()]
+            [robot.ee_position, robot.ee_velocity, [robot.finger_width], per_object.ravel(), empty]
         ).astype(np.float32)
         return {"observation": observation, "instruction": self._tokens.copy()}
 

@@ -73,10 +73,11 @@ corners were not.
 OBJECT_AREA = Box(low=(-0.15, -0.15, 0.0), high=(0.15, 0.15, 0.0))
 """Where object centres may be placed (30 x 30 cm on the table top)."""
 
-WORKSPACE = Box(low=(-0.22, -0.22, 0.015), high=(0.22, 0.22, 0.30))
+WORKSPACE = Box(low=(-0.22, -0.22, 0.015), high=(0.22, 0.22, 0.20))
 """Clip box for the end-effector target (the point between the fingertips).
 
 It covers the object area plus a 7 cm margin so objects at the border can be pushed
 inwards; the floor keeps the fingertips (1.1 cm below the end-effector point) just above
-the table top.
+the table top. The ceiling, 20 cm, leaves room for the highest lift (10 cm) and keeps random
+exploration near the objects.
 """

@@ -61,14 +61,34 @@ def read_pointer(pointer: Path) -> Path:
     return pointer.parent / pointer.read_text().strip()
 
 
+def resolve_checkpoint(path: Path) -> Path:
+    """The checkpoint directory that ``path`` names: a checkpoint itself, a pointer file (``latest``,
+    ``best``, ``last``) or a run folder, meaning its latest checkpoint."""
+    if path.is_dir() and (path / AGENT_FILE).is_file():
+        return path
+    if path.is_dir() and (path / LATEST).is_file():
+        return resolve_checkpoint(read_pointer(path / LATEST))
+    if path.is_file() and path.stat().st_size < 4096:
+        return resolve_checkpoint(read_pointer(path))
+    if not path.exists():
+        raise CheckpointError(f"{path} does not exist")
+    raise CheckpointError(
+        f"{path} is neither a checkpoint (a directory with {AGENT_FILE}), a pointer file such as 'latest', "
+        f"nor a run folder with a '{LATEST}' pointer"
+    )
+
+
 def save_checkpoint(
     directory: Path,
     agent_state: dict[str, Any],
-    buffer: ReplayBuffer,
+    buffer: ReplayBuffer | None,
     state: dict[str, Any],
-    partials: list[dict[str, np.ndarray]],
+    partials: list[dict[str, np.ndarray]] | None,
 ) -> Path:
-    """Write a complete checkpoint at ``directory`` (which must not exist yet) and return it."""
+    """Write a checkpoint at ``directory`` (which must not exist yet) and return it.
+
+    Without ``buffer`` and ``partials`` it holds the agent and the state only: enough to evaluate, not to
+    resume."""
     if directory.exists():
         raise CheckpointError(f"checkpoint {directory} exists already; checkpoints are never overwritten")
     directory.parent.mkdir(parents=True, exist_ok=True)
@@ -77,12 +97,15 @@ def save_checkpoint(
         shutil.rmtree(tmp)
     tmp.mkdir()
     torch.save(agent_state, tmp / AGENT_FILE)
-    buffer.save(tmp / BUFFER_FILE)
     (tmp / STATE_FILE).write_text(json.dumps(state, indent=1))
-    arrays = {f"{i}/{key}": value for i, partial in enumerate(partials) for key, value in partial.items()}
-    with open(tmp / PARTIAL_FILE, "wb") as f:
-        np.savez(f, **arrays)
-    for name in (AGENT_FILE, BUFFER_FILE, STATE_FILE, PARTIAL_FILE):
+    names = [AGENT_FILE, STATE_FILE]
+    if buffer is not None and partials is not None:
+        buffer.save(tmp / BUFFER_FILE)
+        arrays = {f"{i}/{key}": value for i, partial in enumerate(partials) for key, value in partial.items()}
+        with open(tmp / PARTIAL_FILE, "wb") as f:
+            np.savez(f, **arrays)
+        names += [BUFFER_FILE, PARTIAL_FILE]
+    for name in names:
         _fsync_file(tmp / name)
     _fsync_dir(tmp)
     os.replace(tmp, directory)
@@ -104,13 +127,27 @@ def load_agent_state(directory: Path, device: str | torch.device = "cpu") -> dic
         ) from None
 
 
-def load_checkpoint(directory: Path, device: str | torch.device = "cpu") -> tuple[dict[str, Any], ReplayBuffer, dict[str, Any], list[dict[str, np.ndarray]]]:
+def load_state(directory: Path) -> dict[str, Any]:
+    """The plain data of a checkpoint: settings, counters, random states."""
+    path = directory / STATE_FILE
+    if not path.is_file():
+        raise CheckpointError(f"{directory} is not a checkpoint: {STATE_FILE} is missing")
+    return json.loads(path.read_text())
+
+
+def load_checkpoint(
+    directory: Path, device: str | torch.device = "cpu"
+) -> tuple[dict[str, Any], ReplayBuffer, dict[str, Any], list[dict[str, np.ndarray]]]:
+    """Everything a resumable checkpoint holds: agent state, replay buffer, state, unfinished episodes."""
     missing = [n for n in (AGENT_FILE, BUFFER_FILE, STATE_FILE, PARTIAL_FILE) if not (directory / n).is_file()]
     if missing:
-        raise CheckpointError(f"{directory} is not a complete checkpoint: missing {', '.join(missing)}")
+        raise CheckpointError(
+            f"{directory} cannot be resumed from: missing {', '.join(missing)} "
+            "(a 'best' checkpoint holds the agent only, for evaluation)"
+        )
     agent_state = load_agent_state(directory, device)
     buffer = ReplayBuffer.load(directory / BUFFER_FILE)
-    state = json.loads((directory / STATE_FILE).read_text())
+    state = load_state(directory)
     partials: dict[int, dict[str, np.ndarray]] = {}
     with np.load(directory / PARTIAL_FILE, allow_pickle=False) as archive:
         for name in archive.files:

@@ -9,6 +9,8 @@ run continues the same episodes instead of starting new ones.
 
 from __future__ import annotations
 
+import multiprocessing
+import signal
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -163,8 +165,9 @@ class Collector:
         snapshots = [EnvSnapshot.from_dict(s) for s in restore] if restore else [None] * n_envs
         if len(snapshots) != n_envs:
             raise ValueError(f"the checkpoint holds {len(snapshots)} environments, not {n_envs}")
-        fns = [self._factory(make_env, snapshot) for snapshot in snapshots]
-        vector_cls = SyncVectorEnv if n_envs == 1 else AsyncVectorEnv
+        in_subprocess = n_envs > 1
+        fns = [self._factory(make_env, snapshot, in_subprocess) for snapshot in snapshots]
+        vector_cls = AsyncVectorEnv if in_subprocess else SyncVectorEnv
         self.envs = vector_cls(fns, autoreset_mode=AutoresetMode.SAME_STEP)
         self.n_envs = n_envs
         self.task = task
@@ -172,8 +175,18 @@ class Collector:
         self._partials = [self._new_partial(info, i) for i in range(n_envs)]
 
     @staticmethod
-    def _factory(make_env: Callable[[], LanroEnv], snapshot: EnvSnapshot | None) -> Callable[[], TrainingEnv]:
-        return lambda: TrainingEnv(make_env(), snapshot)
+    def _factory(
+        make_env: Callable[[], LanroEnv], snapshot: EnvSnapshot | None, in_subprocess: bool
+    ) -> Callable[[], TrainingEnv]:
+        def build() -> TrainingEnv:
+            # Ctrl-C in a terminal reaches the whole process group. The workers leave it to the main
+            # process, which stops cleanly and writes a checkpoint that needs them alive. (The vector env
+            # also builds one environment in the main process, to read its spaces: that one must not.)
+            if in_subprocess and multiprocessing.parent_process() is not None:
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
+            return TrainingEnv(make_env(), snapshot)
+
+        return build
 
     @staticmethod
     def _new_partial(info: dict[str, Any], i: int) -> _Partial:

@@ -1,14 +1,15 @@
-"""One stage of training: collect with N environments, learn, evaluate every K steps, checkpoint.
+"""Training on one stage's environments: collect with N environments, learn, evaluate, checkpoint.
 
 The trainer owns every piece of state a run has (agent, replay buffer, sampling generator, environments
 mid-episode, counters) and can write all of it to a checkpoint and continue from one as if it had never
-stopped: on CPU with one environment, N steps straight and N/2 + resume + N/2 give identical parameters.
+stopped: on CPU, N steps straight and N/2 + save + load + N/2 give identical parameters. When to evaluate,
+where checkpoints go and when a stage ends is the curriculum's business (:mod:`lanrocli.train.pipeline`).
 """
 
 from __future__ import annotations
 
-import csv
 import dataclasses
+import functools
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -21,16 +22,9 @@ import torch
 from lanrocli.agent import ReplayBuffer, SACAgent, SACSettings
 from lanrocli.envs import LanroEnv, observation_size
 from lanrocli.envs.evaluation import EvaluationReport, evaluate
+from lanrocli.envs.tasks import make_task
 from lanrocli.language import grammar_vocabulary
-from lanrocli.train.checkpoint import (
-    LATEST,
-    CheckpointError,
-    load_checkpoint,
-    prune,
-    read_pointer,
-    save_checkpoint,
-    write_pointer,
-)
+from lanrocli.train.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from lanrocli.train.collect import Collector, state_from_json, state_to_json
 
 EVAL_SEED = 1_000_000
@@ -39,33 +33,44 @@ EVAL_SEED = 1_000_000
 SUCCESS_WINDOW = 100
 """Training episodes over which the reported training success is averaged."""
 
-CHECKPOINTS = "checkpoints"
-METRICS = "metrics.csv"
 
 
 @dataclass(frozen=True)
 class TrainSettings:
-    """What one training run needs besides the agent's own settings."""
+    """What training one stage needs besides the agent's own settings."""
 
     task: str = "reach"
     env: Mapping[str, Any] = field(default_factory=dict)
     """Keyword arguments of ``LanroEnv`` besides the task (objects, mode, correction_rate, ...)."""
     seed: int = 0
     envs: int = 1
-    eval_every: int = 5000
     eval_episodes: int = 20
     learning_starts: int = 1000
     """Environment steps collected before the first update."""
-    max_objects: int = 3
-    """Object slots in the buffer; at least the number of objects of any stage."""
+    object_slots: int | None = None
+    """Objects the observation and the buffer have room for; ``None``: the stage's objects. A curriculum
+    sets the most objects of any of its stages, so one network serves all of them."""
+    stage: int = 0
+    """Index of the stage in its curriculum: the environments of each stage get their own seeds."""
 
     def __post_init__(self) -> None:
         if self.envs < 1:
             raise ValueError(f"envs must be at least 1, got {self.envs}")
-        if self.eval_every < 1 or self.eval_episodes < 1:
-            raise ValueError("eval_every and eval_episodes must be positive")
+        if self.eval_episodes < 1:
+            raise ValueError("eval_episodes must be positive")
         if self.learning_starts < 0:
             raise ValueError(f"learning_starts must not be negative, got {self.learning_starts}")
+        if self.object_slots is not None and self.object_slots < int(self.env.get("objects", 2)):
+            raise ValueError(f"object_slots {self.object_slots} is fewer than the stage's objects")
+
+    @property
+    def slots(self) -> int:
+        return self.object_slots if self.object_slots is not None else int(self.env.get("objects", 2))
+
+    @property
+    def env_seed(self) -> int:
+        """Seed of the stage's first environment (the others follow it)."""
+        return int(np.random.SeedSequence([self.seed, self.stage]).generate_state(1)[0])
 
     def to_dict(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
@@ -108,28 +113,25 @@ class Progress:
 
 
 class Trainer:
-    def __init__(
-        self,
-        settings: TrainSettings,
-        agent_settings: SACSettings,
-        out: Path,
-        device: str | torch.device = "cpu",
-    ) -> None:
+    """Collects, learns and evaluates on one stage's environments; saves and loads all of its state.
+
+    Agent, replay buffer, sampling generator and counters outlive a stage: :meth:`enter_stage` only
+    changes what the environments are, which is how a curriculum moves on.
+    """
+
+    def __init__(self, settings: TrainSettings, agent_settings: SACSettings, device: str | torch.device = "cpu") -> None:
         self.settings = settings
         self.agent_settings = agent_settings
-        self.out = out
         self.device = torch.device(device)
         self.vocabulary = grammar_vocabulary()
-        probe = self._make_env()
-        obs_dim = probe.observation_space["observation"].shape[0]
-        action_dim = probe.action_space.shape[0]
-        probe.close()
+        obs_dim = observation_size(settings.slots)
+        action_dim = 4 if make_task(settings.task).gripper else 3
         self.agent = SACAgent(obs_dim, action_dim, len(self.vocabulary), agent_settings, settings.seed, self.device)
         self.buffer = ReplayBuffer(
             agent_settings.buffer_size,
             obs_dim,
             action_dim,
-            max_objects=settings.max_objects,
+            max_objects=settings.slots,
             vocabulary=self.vocabulary,
             negations=bool(settings.env.get("negations", False)),
             seed=settings.seed,
@@ -137,13 +139,27 @@ class Trainer:
         self.rng = np.random.default_rng(np.random.SeedSequence(settings.seed).spawn(2)[1])
         self.progress = Progress()
         self.last_metrics: dict[str, float] = {}
-        self.last_report: EvaluationReport | None = None
         self._collector: Collector | None = None
+        self._restore: tuple[list[dict[str, Any]], list[dict[str, np.ndarray]]] | None = None
         self._started = time.perf_counter()
         self._wall_before = 0.0
 
-    def _make_env(self) -> LanroEnv:
-        return LanroEnv(self.settings.task, **self.settings.env)
+    def env_factory(self) -> Callable[[], LanroEnv]:
+        """Builds environments of the current stage, observed through the run's object slots. A plain
+        partial, so that subprocesses receive the settings and not the trainer."""
+        s = self.settings
+        return functools.partial(LanroEnv, s.task, object_slots=s.slots, **s.env)
+
+    def enter_stage(self, env: Mapping[str, Any], stage: int) -> None:
+        """Collect and evaluate with new environment settings from now on.
+
+        The old stage's unfinished episodes are dropped: they were collected under a goal distribution
+        that no longer holds, and half an episode gives relabelling no future to look at.
+        """
+        self.close()
+        self._restore = None
+        self.settings = dataclasses.replace(self.settings, env=dict(env), stage=stage)
+        self.buffer.negations = bool(env.get("negations", False))
 
     # -- running -----------------------------------------------------------------------------------------
 
@@ -152,19 +168,13 @@ class Trainer:
         until: int,
         should_stop: Callable[[], bool] = lambda: False,
         on_step: Callable[[Trainer], None] | None = None,
-        on_evaluation: Callable[[Trainer, EvaluationReport], None] | None = None,
     ) -> bool:
-        """Train until ``until`` environment steps in total; returns False if ``should_stop`` ended it early.
-
-        A checkpoint is written after every evaluation and when stopping early.
-        """
+        """Collect and learn until ``until`` environment steps in total; False if ``should_stop`` ended it
+        early (checked before every step)."""
         s, a = self.settings, self.agent_settings
-        if self._collector is None:
-            self._collector = Collector(self._make_env, s.envs, s.task, s.seed)
-        collector = self._collector
+        collector = self._ensure_collector()
         while self.progress.env_steps < until:
             if should_stop():
-                self.checkpoint()
                 return False
             actions = self.agent.act(collector.observation)
             collector.step_async(actions)
@@ -178,78 +188,66 @@ class Trainer:
                 self.progress.episodes += 1
                 self.progress.train_successes.append(episode.success)
                 del self.progress.train_successes[:-SUCCESS_WINDOW]
-            before = self.progress.env_steps
             self.progress.env_steps += s.envs
             if on_step is not None:
                 on_step(self)
-            if self.progress.env_steps // s.eval_every > before // s.eval_every:
-                report = self.evaluate()
-                if on_evaluation is not None:
-                    on_evaluation(self, report)
-                self.checkpoint()
         return True
 
+    def _ensure_collector(self) -> Collector:
+        if self._collector is None:
+            s = self.settings
+            snapshots, partials = self._restore if self._restore is not None else (None, None)
+            self._collector = Collector(self.env_factory(), s.envs, s.task, s.env_seed, restore=snapshots)
+            if partials is not None:
+                self._collector.restore_partials(partials)
+            self._restore = None
+        return self._collector
+
     def evaluate(self, episodes: int | None = None) -> EvaluationReport:
-        env = self._make_env()
+        """The deterministic policy on the stage's fixed evaluation episodes (the same seeds every time)."""
+        env = self.env_factory()()
         try:
-            report = evaluate(env, AgentPolicy(self.agent), episodes or self.settings.eval_episodes, EVAL_SEED)
+            return evaluate(env, AgentPolicy(self.agent), episodes or self.settings.eval_episodes, EVAL_SEED)
         finally:
             env.close()
-        self.progress.evaluations += 1
-        self.last_report = report
-        self._log(report)
-        return report
+
+    @property
+    def train_success(self) -> float | None:
+        """Success over the last training episodes (stochastic policy), or None before the first one ends."""
+        successes = self.progress.train_successes
+        return float(np.mean(successes)) if successes else None
 
     def wall_time(self) -> float:
+        """Seconds of training so far, over every resumed part of the run."""
         return self._wall_before + time.perf_counter() - self._started
-
-    def _log(self, report: EvaluationReport) -> None:
-        path = self.out / METRICS
-        row = {
-            "env_steps": self.progress.env_steps,
-            "wall_time": round(self.wall_time(), 2),
-            "success": report.overall.success,
-            "correction_success": report.corrections.success if report.corrections.episodes else "",
-            "mean_return": report.mean_return,
-            "train_success": float(np.mean(self.progress.train_successes)) if self.progress.train_successes else "",
-            **{k: round(v, 5) for k, v in self.last_metrics.items()},
-        }
-        self.out.mkdir(parents=True, exist_ok=True)
-        new = not path.exists()
-        with open(path, "a", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=list(row))
-            if new:
-                writer.writeheader()
-            writer.writerow(row)
 
     # -- checkpoints -------------------------------------------------------------------------------------
 
-    def checkpoint(self) -> Path:
-        assert self._collector is not None
-        root = self.out / CHECKPOINTS
-        directory = root / f"step-{self.progress.env_steps:010d}"
-        if directory.exists():  # already written at this step (an evaluation and a stop coincide)
-            return directory
+    def save(self, directory: Path, extra: Mapping[str, Any] | None = None, resumable: bool = True) -> Path:
+        """Write a checkpoint at ``directory`` (which must not exist). ``extra``: plain data of the caller's
+        (a curriculum's position) stored beside the trainer's. A checkpoint that is not ``resumable`` holds
+        the agent and the settings only: enough to evaluate, a fraction of the size."""
         state = {
             "train_settings": self.settings.to_dict(),
+            "agent_settings": self.agent_settings.to_dict(),
             "vocabulary": self.vocabulary.to_dict(),
             "progress": dataclasses.asdict(self.progress),
             "rng": state_to_json(self.rng.bit_generator.state),
-            "environments": self._collector.snapshots(),
             "wall_time": self.wall_time(),
+            "extra": dict(extra or {}),
         }
-        save_checkpoint(directory, self.agent.state_dict(), self.buffer, state, self._collector.partials())
-        write_pointer(self.out / LATEST, f"{CHECKPOINTS}/{directory.name}")
-        prune(root, keep={directory})
-        return directory
+        if not resumable:
+            return save_checkpoint(directory, self.agent.state_dict(), None, state, None)
+        collector = self._ensure_collector()
+        state["environments"] = collector.snapshots()
+        return save_checkpoint(directory, self.agent.state_dict(), self.buffer, state, collector.partials())
 
     @classmethod
-    def resume(cls, out: Path, device: str | torch.device = "cpu") -> Trainer:
-        """The run in ``out``, exactly as its latest checkpoint left it."""
-        directory = read_pointer(out / LATEST)
+    def load(cls, directory: Path, device: str | torch.device = "cpu") -> tuple[Trainer, dict[str, Any]]:
+        """The trainer exactly as a resumable checkpoint left it, and the caller's ``extra`` data."""
         agent_state, buffer, state, partials = load_checkpoint(directory, device)
         settings = TrainSettings(**state["train_settings"])
-        trainer = cls(settings, SACSettings.from_dict(agent_state["settings"]), out, device)
+        trainer = cls(settings, SACSettings.from_dict(state["agent_settings"]), device)
         if trainer.vocabulary.to_dict() != state["vocabulary"]:
             raise CheckpointError(f"{directory} was written with another vocabulary than this version of lanro's")
         trainer.agent.load_state_dict(agent_state)
@@ -257,14 +255,10 @@ class Trainer:
         trainer.progress = Progress(**state["progress"])
         trainer.rng.bit_generator.state = state_from_json(state["rng"])
         trainer._wall_before = float(state["wall_time"])
-        trainer._collector = Collector(
-            trainer._make_env, settings.envs, settings.task, settings.seed, restore=state["environments"]
-        )
-        trainer._collector.restore_partials(partials)
-        return trainer
+        trainer._restore = (state["environments"], partials)
+        return trainer, state["extra"]
 
     def close(self) -> None:
         if self._collector is not None:
             self._collector.close()
             self._collector = None
-

@@ -195,3 +195,17 @@ def test_render_returns_a_captioned_image() -> None:
     assert image is not None and image.dtype == np.uint8 and image.shape == (360, 480, 3)
     assert image[:20].mean() < image[100:].mean()  # the dark caption band
     env.close()
+
+
+def test_object_slots_pad_the_observation_with_zeros() -> None:
+    env = LanroEnv("reach", objects=2, object_slots=3)
+    obs, _ = env.reset(seed=4)
+    assert env.observation_space["observation"].shape == (observation_size(3),)
+    assert obs["observation"].shape == (observation_size(3),)
+    assert np.all(obs["observation"][observation_size(2):] == 0.0)
+    plain = LanroEnv("reach", objects=2)
+    np.testing.assert_array_equal(plain.reset(seed=4)[0]["observation"], obs["observation"][: observation_size(2)])
+    env.close()
+    plain.close()
+    with pytest.raises(ValueError, match="object_slots"):
+        LanroEnv("reach", objects=3, object_slots=2)

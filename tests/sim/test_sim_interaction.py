@@ -93,6 +93,6 @@ def test_scripted_grasp_and_lift(
     lifted = objects.states().positions[0]
     assert lifted[2] > 0.17
     np.testing.assert_allclose(lifted[:2], [x, y], atol=0.02)
-    drive_to(world, gripper_panda, [x, y, 0.1], grip=1.0)
+    drive_to(world, gripper_panda, [x, y, centre[2] + 0.02], grip=-1.0)
     hold_still(world, gripper_panda, 15, grip=1.0)
     assert objects.states().positions[0, 2] == pytest.approx(obj.height / 2, abs=0.005)

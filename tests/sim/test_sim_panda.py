@@ -10,7 +10,7 @@ from lanrocli.sim import CONTROL_DT, MAX_FINGER_WIDTH, WORKSPACE, Panda, World
 
 def test_reset_puts_end_effector_above_the_table_centre(panda: Panda) -> None:
     state = panda.state()
-    np.testing.assert_allclose(state.ee_position, [0.0, 0.0, 0.2], atol=0.002)
+    np.testing.assert_allclose(state.ee_position, [0.0, 0.0, 0.1], atol=0.002)
     np.testing.assert_allclose(state.ee_velocity, 0.0, atol=1e-9)
     assert state.finger_width == pytest.approx(0.0)
     assert state.joint_positions.shape == (9,)
@@ -21,7 +21,9 @@ def test_reset_puts_end_effector_above_the_table_centre(panda: Panda) -> None:
 def test_full_action_moves_about_four_centimetres_per_step(
     world: World, panda: Panda, drive_to: Callable[..., int], axis: int, sign: float
 ) -> None:
-    drive_to(world, panda, [0.0, 0.0, 0.16])
+    start = np.array([0.0, 0.0, 0.1])
+    start[axis] -= sign * 0.05  # room for three full steps inside the workspace
+    drive_to(world, panda, start)
     action = np.zeros(3)
     action[axis] = sign
     for _ in range(2):
@@ -75,7 +77,7 @@ def test_end_effector_stays_in_workspace_under_random_actions(
 def test_end_effector_reaches_workspace_corners(
     world: World, panda: Panda, drive_to: Callable[..., int]
 ) -> None:
-    for corner in ([0.2, 0.2, 0.02], [0.2, -0.2, 0.28], [-0.2, 0.2, 0.28], [-0.2, -0.2, 0.02]):
+    for corner in ([0.2, 0.2, 0.02], [0.2, -0.2, 0.19], [-0.2, 0.2, 0.19], [-0.2, -0.2, 0.02]):
         panda.reset()
         steps = drive_to(world, panda, corner, tolerance=0.005)
         assert steps < 40, corner

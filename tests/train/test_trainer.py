@@ -1,4 +1,4 @@
-"""Training end to end, resume equivalence, and checkpoints that survive kills and refuse pickles."""
+"""One stage of training end to end, resume equivalence, and checkpoints that survive kills and refuse pickles."""
 
 from __future__ import annotations
 
@@ -23,7 +23,6 @@ SETTINGS = TrainSettings(
     env={"objects": 2, "correction_rate": 0.5},
     seed=3,
     envs=1,
-    eval_every=130,
     eval_episodes=2,
     learning_starts=64,
 )
@@ -35,8 +34,8 @@ def parameters(trainer: Trainer) -> list[torch.Tensor]:
     return [p.detach().clone() for net in (agent.actor, agent.critic, agent.target_critic) for p in net.parameters()]
 
 
-def test_tiny_training_run_end_to_end(tmp_path: Path) -> None:
-    trainer = Trainer(SETTINGS, AGENT, tmp_path)
+def test_tiny_training_run_end_to_end() -> None:
+    trainer = Trainer(SETTINGS, AGENT)
     before = parameters(trainer)
     assert trainer.run(300)
     assert trainer._collector is not None
@@ -47,23 +46,21 @@ def test_tiny_training_run_end_to_end(tmp_path: Path) -> None:
     # Every step is either in a stored episode or in the episode still running.
     assert trainer.buffer.size + unfinished == 300
     assert any(not torch.equal(a, b) for a, b in zip(before, parameters(trainer)))
-    rows = (tmp_path / "metrics.csv").read_text().splitlines()
-    assert len(rows) == 1 + 2 and rows[0].startswith("env_steps,wall_time,success")
-    latest = read_pointer(tmp_path / LATEST)
-    assert latest.name == "step-0000000260" and latest.is_dir()
+    report = trainer.evaluate()
+    assert report.overall.episodes == 2 and all(r.length <= 100 for r in report.results)
 
 
 def test_resume_continues_exactly(tmp_path: Path) -> None:
-    straight = Trainer(SETTINGS, AGENT, tmp_path / "straight")
+    straight = Trainer(SETTINGS, AGENT)
     straight.run(300)
     straight.close()
 
-    first = Trainer(SETTINGS, AGENT, tmp_path / "split")
+    first = Trainer(SETTINGS, AGENT)
     first.run(150)  # stops mid-episode: push episodes with corrections last up to 100 steps
-    first.checkpoint()
+    first.save(tmp_path / "split", {"note": "kept"})
     first.close()
-    resumed = Trainer.resume(tmp_path / "split")
-    assert resumed.progress.env_steps == 150
+    resumed, extra = Trainer.load(tmp_path / "split")
+    assert resumed.progress.env_steps == 150 and extra == {"note": "kept"}
     resumed.run(300)
     resumed.close()
 
@@ -73,13 +70,26 @@ def test_resume_continues_exactly(tmp_path: Path) -> None:
     np.testing.assert_array_equal(straight.buffer.data["obs"], resumed.buffer.data["obs"])
 
 
-def test_stop_request_writes_a_checkpoint(tmp_path: Path) -> None:
-    trainer = Trainer(SETTINGS, AGENT, tmp_path)
+def test_stop_request_ends_the_run_before_the_next_step() -> None:
+    trainer = Trainer(SETTINGS, AGENT)
     calls = iter(range(1000))
     assert not trainer.run(300, should_stop=lambda: next(calls) >= 40)
     trainer.close()
-    assert read_pointer(tmp_path / LATEST).name == "step-0000000040"
-    assert Trainer.resume(tmp_path).progress.env_steps == 40
+    assert trainer.progress.env_steps == 40
+
+
+def test_entering_a_stage_changes_the_environments_and_keeps_the_learning() -> None:
+    settings = TrainSettings(task="reach", env={"objects": 2}, envs=1, learning_starts=32, object_slots=3)
+    trainer = Trainer(settings, AGENT)
+    trainer.run(60)
+    updates, stored = trainer.progress.updates, trainer.buffer.size
+    trainer.enter_stage({"objects": 3, "correction_rate": 0.5, "negations": True}, stage=1)
+    trainer.run(200)
+    trainer.close()
+    assert trainer.progress.updates > updates and trainer.buffer.size > stored and trainer.buffer.negations
+    assert trainer.evaluate(1).results[0].length <= 100  # the stage's limit: correction episodes get 100 steps
+    three = trainer.buffer.data["objects"][: trainer.buffer.high, 2, 0] != 255
+    assert three.any() and not three.all()  # both stages' episodes, in one buffer of 3 object slots
 
 
 WRITER = """
@@ -87,14 +97,16 @@ import sys
 from pathlib import Path
 from lanrocli.agent import SACSettings
 from lanrocli.train import Trainer, TrainSettings
-trainer = Trainer(TrainSettings(task="reach", env={"objects": 2}, learning_starts=10_000, eval_every=10**9),
-                  SACSettings(buffer_size=2000), Path(sys.argv[1]))
-trainer.run(1)
-trainer.checkpoint()
-print("ready", flush=True)
+from lanrocli.train.checkpoint import LATEST, prune, write_pointer
+out = Path(sys.argv[1])
+trainer = Trainer(TrainSettings(task="reach", env={"objects": 2}, learning_starts=10_000), SACSettings(buffer_size=2000))
 while True:
     trainer.run(trainer.progress.env_steps + 1)
-    trainer.checkpoint()
+    directory = trainer.save(out / f"step-{trainer.progress.env_steps:06d}")
+    write_pointer(out / LATEST, directory.name)
+    prune(out, keep={directory})
+    if trainer.progress.env_steps == 1:
+        print("ready", flush=True)
 """
 
 
@@ -105,16 +117,16 @@ def test_sigkill_during_checkpoint_writes_leaves_a_loadable_checkpoint(tmp_path:
     time.sleep(delay)
     os.kill(process.pid, signal.SIGKILL)
     process.wait()
-    trainer = Trainer.resume(tmp_path)
+    trainer, _ = Trainer.load(read_pointer(tmp_path / LATEST))
     assert trainer.progress.env_steps >= 1
     trainer.run(trainer.progress.env_steps + 5)
     trainer.close()
 
 
 def test_pickled_objects_are_refused(tmp_path: Path) -> None:
-    trainer = Trainer(SETTINGS, AGENT, tmp_path)
+    trainer = Trainer(SETTINGS, AGENT)
     trainer.run(5)
-    directory = trainer.checkpoint()
+    directory = trainer.save(tmp_path / "checkpoint")
     trainer.close()
     state = torch.load(directory / AGENT_FILE, weights_only=True)
     state["note"] = Path("/etc/passwd")  # any object beyond tensors and plain data
@@ -122,12 +134,19 @@ def test_pickled_objects_are_refused(tmp_path: Path) -> None:
     with pytest.raises(CheckpointError, match="other than tensors and plain data"):
         load_agent_state(directory)
     with pytest.raises(CheckpointError):
-        Trainer.resume(tmp_path)
+        Trainer.load(directory)
 
 
-def test_missing_checkpoint_is_a_clear_error(tmp_path: Path) -> None:
+def test_missing_or_evaluation_only_checkpoints_are_clear_errors(tmp_path: Path) -> None:
     with pytest.raises(CheckpointError, match="no checkpoint pointer"):
-        Trainer.resume(tmp_path)
+        read_pointer(tmp_path / LATEST)
+    trainer = Trainer(SETTINGS, AGENT)
+    trainer.run(5)
+    light = trainer.save(tmp_path / "best", resumable=False)
+    trainer.close()
+    assert load_agent_state(light)["updates"] == 0
+    with pytest.raises(CheckpointError, match="cannot be resumed from"):
+        Trainer.load(light)
 
 
 def test_cuda_request_without_cuda_is_a_clear_error() -> None:
@@ -141,8 +160,8 @@ def test_cuda_request_without_cuda_is_a_clear_error() -> None:
 
 
 def test_two_environments_in_subprocesses_collect_whole_episodes(tmp_path: Path) -> None:
-    settings = TrainSettings(task="reach", env={"objects": 2}, seed=1, envs=2, eval_every=10**9, learning_starts=10**6)
-    trainer = Trainer(settings, AGENT, tmp_path)
+    settings = TrainSettings(task="reach", env={"objects": 2}, seed=1, envs=2, learning_starts=10**6)
+    trainer = Trainer(settings, AGENT)
     trainer.run(240)
     trainer.close()
     assert trainer.progress.env_steps == 240 and trainer.progress.episodes >= 4

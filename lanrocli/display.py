@@ -1,0 +1,158 @@
+"""What ``lanro train`` shows while it runs, and how it stops when asked.
+
+In a terminal: a live progress bar over the current stage's budget with its promotion rule, environment
+steps per second, the last evaluation and the time left. Anywhere else (CI, nohup, a cluster job's log) a
+live display would fill the log with control codes, so plain lines are printed instead: one per
+evaluation, one per stage, and a progress line every minute.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import time
+from types import FrameType, TracebackType
+from typing import Any
+
+from rich.console import Console
+from rich.markup import escape
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+from lanrocli.train.curriculum import Stage
+from lanrocli.train.pipeline import CurriculumRun, RunObserver, StageResult
+
+PLAIN_INTERVAL = 60.0
+"""Seconds between progress lines when the output is not a terminal."""
+
+RATE_WINDOW = 10.0
+"""Seconds over which environment steps per second are measured."""
+
+
+def _rule(stage: Stage) -> str:
+    if stage.promote is None:
+        return "runs its whole budget"
+    return f"promote at {stage.promote.on} success >= {stage.promote.success:g} ({stage.promote.patience}x)"
+
+
+def _rate(value: Any) -> str:
+    return "-" if value in ("", None) else f"{100 * float(value):.0f}%"
+
+
+class TrainingDisplay(RunObserver):
+    """Draws a run's progress live (``live=True``) or as plain periodic lines."""
+
+    def __init__(self, console: Console, live: bool) -> None:
+        self.console = console
+        self.live = live
+        self._progress: Progress | None = None
+        self._task: Any = None
+        self._last_eval = "no evaluation yet"
+        self._samples: list[tuple[float, int]] = []
+        self._next_line = 0.0
+
+    @classmethod
+    def for_terminal(cls) -> TrainingDisplay:
+        console = Console()
+        # A log file has no width: long lines stay whole, so commands printed in them can be copied.
+        return cls(Console(soft_wrap=not console.is_terminal), live=console.is_terminal)
+
+    def __enter__(self) -> TrainingDisplay:
+        if self.live:
+            self._progress = Progress(
+                TextColumn("[bold]{task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("{task.fields[rate]} steps/s"),
+                TimeRemainingColumn(),
+                TextColumn("{task.fields[evaluation]}"),
+                console=self.console,
+            )
+            self._progress.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._progress is not None:
+            self._progress.stop()
+            self._progress = None
+
+    # -- observer --------------------------------------------------------------------------------------------
+
+    def on_stage_start(self, run: CurriculumRun, stage: Stage) -> None:
+        index = run.state.stage
+        header = f"stage {index + 1}/{len(run.curriculum.stages)} {stage.name}: {stage.budget.steps:,} steps, {_rule(stage)}"
+        self._samples.clear()
+        if self._progress is not None:
+            self._progress.console.print(header)
+            if self._task is not None:
+                self._progress.remove_task(self._task)
+            self._task = self._progress.add_task(
+                f"{index + 1}. {stage.name}", total=stage.budget.steps, rate="-", evaluation=self._last_eval
+            )
+        else:
+            self.console.print(header)
+            self._next_line = time.monotonic() + PLAIN_INTERVAL
+
+    def on_step(self, run: CurriculumRun) -> None:
+        now = time.monotonic()
+        if self._samples and now - self._samples[-1][0] < 0.25:
+            return
+        steps = run.trainer.progress.env_steps
+        self._samples.append((now, steps))
+        while now - self._samples[0][0] > RATE_WINDOW:
+            self._samples.pop(0)
+        (t0, s0), (t1, s1) = self._samples[0], self._samples[-1]
+        rate = f"{(s1 - s0) / (t1 - t0):.0f}" if t1 > t0 else "-"
+        done = steps - run.state.stage_start
+        if self._progress is not None and self._task is not None:
+            self._progress.update(self._task, completed=done, rate=rate, evaluation=self._last_eval)
+        elif not self.live and now >= self._next_line:
+            self._next_line = now + PLAIN_INTERVAL
+            stage = run.curriculum.stages[run.state.stage]
+            self.console.print(
+                escape(f"[{stage.name}] {done:,}/{stage.budget.steps:,} steps, {rate} steps/s, last {self._last_eval}")
+            )
+
+    def on_evaluation(self, run: CurriculumRun, row: dict[str, Any]) -> None:
+        self._last_eval = f"evaluation: success {_rate(row['success'])}, corrections {_rate(row['correction_success'])}"
+        line = escape(f"[{row['stage_name']}] step {row['env_steps']:,}: {self._last_eval}")
+        if self._progress is not None:
+            self._progress.console.print(line)
+        else:
+            self.console.print(line)
+
+    def on_stage_end(self, run: CurriculumRun, result: StageResult) -> None:
+        how = "promoted" if result.ended == "promoted" else "budget spent"
+        line = f"stage {result.index + 1} {result.name} ended ({how}) after {result.end - result.start:,} steps"
+        (self._progress.console if self._progress is not None else self.console).print(line)
+
+
+class StopRequest:
+    """Turns the first Ctrl-C (or SIGTERM, as a cluster sends before it kills a job) into a polite request
+    that the run checkpoints and stops; a second Ctrl-C aborts at once."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self._requested = False
+        self._previous: dict[int, Any] = {}
+
+    def requested(self) -> bool:
+        return self._requested
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        if self._requested:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            raise KeyboardInterrupt
+        self._requested = True
+        print("\nstopping: writing a checkpoint (press Ctrl-C again to abort without one)", file=sys.stderr, flush=True)
+
+    def __enter__(self) -> StopRequest:
+        for signum in self.SIGNALS:
+            self._previous[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)

@@ -1,0 +1,402 @@
+"""A curriculum run: its stages one after another, evaluated as they go, promoted by their rules.
+
+The run folder holds everything a researcher looks at or resumes from::
+
+    config.yaml                  the resolved curriculum; --resume refuses a curriculum that differs
+    metrics.csv                  one row per evaluation
+    report.md                    the per-stage table, rewritten whenever a stage ends
+    latest                       pointer to the newest checkpoint
+    stage-K-NAME/step-N/         the stage's newest resumable checkpoint (agent, buffer, environments)
+    stage-K-NAME/best-N/         the agent of the stage's best evaluation (agent and state only)
+    stage-K-NAME/last, best      pointers to those two
+    events.*                     TensorBoard scalars, when the tensorboard package is installed
+
+Within a stage, evaluation happens every ``eval.every`` environment steps counted from the stage's start
+and when its budget is spent. After each evaluation the stage's promotion rule is checked (the success
+rate on all episodes or on correction episodes, at least ``success`` on ``patience`` evaluations in a
+row); the stage ends when it holds or when the budget is spent, and then the next stage begins with the
+same agent and replay buffer, or, for ``on_budget: stop``, the run ends. A checkpoint follows every
+evaluation and every interruption, so a resumed run repeats nothing and skips nothing: it ends with the
+same stages, step counts and, on CPU, the same numbers as a run that was never stopped.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from lanrocli.envs.evaluation import EvaluationReport
+from lanrocli.envs.instructor import Kind
+from lanrocli.train.checkpoint import LATEST, CheckpointError, prune, read_pointer, write_pointer
+from lanrocli.train.curriculum import Curriculum, Stage, diff_curricula, load_curriculum
+from lanrocli.train.trainer import Trainer, TrainSettings
+
+CONFIG = "config.yaml"
+METRICS = "metrics.csv"
+REPORT = "report.md"
+BEST = "best"
+LAST = "last"
+
+AGENT_METRICS = ("critic_loss", "actor_loss", "alpha_loss", "alpha", "q_mean", "target_q_mean", "entropy")
+METRIC_COLUMNS = (
+    "stage", "stage_name", "env_steps", "stage_steps", "wall_time", "success", "correction_success",
+    *(f"success_{kind.value}" for kind in Kind), "mean_return", "mean_length", "train_success", "rule_holds",
+    *AGENT_METRICS,
+)
+
+
+class RunError(RuntimeError):
+    """A run cannot start or resume as asked (the folder is in use, the curriculum changed, ...)."""
+
+
+@dataclass
+class StageResult:
+    """How a finished stage went; the rows of ``report.md``."""
+
+    index: int
+    name: str
+    start: int
+    end: int
+    ended: str
+    """``promoted`` when the rule held, ``budget`` when the budget ran out first."""
+    evaluations: int
+    success: float
+    correction_success: float | None
+    best: float | None
+    wall_time: float
+
+
+@dataclass
+class RunState:
+    """Where the run is in its curriculum; saved in every checkpoint beside the trainer's own state."""
+
+    stage: int = 0
+    stage_start: int = 0
+    evaluations: int = 0
+    """Evaluations so far in the current stage."""
+    passes: int = 0
+    """Consecutive evaluations, up to the last, on which the promotion rule held."""
+    best: float | None = None
+    """Best success so far in this stage, on what its rule watches (overall without a rule)."""
+    finished: bool = False
+    stopped_early: bool = False
+    """The run ended at a stage whose budget ran out with ``on_budget: stop``."""
+    results: list[StageResult] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> RunState:
+        results = [StageResult(**r) for r in data.get("results", [])]
+        return cls(**{**data, "results": results})
+
+
+class RunObserver:
+    """What a run reports while it goes; the CLI draws it, a test records it. Every method may be left out."""
+
+    def on_stage_start(self, run: CurriculumRun, stage: Stage) -> None: ...
+
+    def on_step(self, run: CurriculumRun) -> None: ...
+
+    def on_evaluation(self, run: CurriculumRun, row: dict[str, Any]) -> None: ...
+
+    def on_stage_end(self, run: CurriculumRun, result: StageResult) -> None: ...
+
+
+def stage_folder(index: int, stage: Stage) -> str:
+    return f"stage-{index + 1}-{stage.name}"
+
+
+def rule_value(stage: Stage, report: EvaluationReport) -> float | None:
+    """The success rate the stage's rule watches (overall without a rule); None if the evaluation had no
+    episode of that sort."""
+    rate = report.corrections if stage.promote is not None and stage.promote.on == "corrections" else report.overall
+    return rate.success if rate.episodes else None
+
+
+class CurriculumRun:
+    """Runs a curriculum in its run folder; :meth:`start` a new run or :meth:`resume` one."""
+
+    def __init__(
+        self, curriculum: Curriculum, out: Path, trainer: Trainer, state: RunState, observer: RunObserver | None
+    ) -> None:
+        self.curriculum = curriculum
+        self.out = out
+        self.trainer = trainer
+        self.state = state
+        self.observer = observer or RunObserver()
+        self._tensorboard = _TensorBoard.open(out, purge_step=trainer.progress.env_steps)
+        if not state.finished and trainer.settings.stage != state.stage:
+            # The checkpoint was written as its stage ended: the next stage starts from here.
+            self._enter(state.stage)
+
+    # -- starting and resuming ---------------------------------------------------------------------------
+
+    @classmethod
+    def start(
+        cls, curriculum: Curriculum, out: Path, device: str | torch.device = "cpu", observer: RunObserver | None = None
+    ) -> CurriculumRun:
+        """A new run in ``out``, which must not exist or be empty: a finished run is never overwritten."""
+        if out.exists() and (not out.is_dir() or any(out.iterdir())):
+            raise RunError(
+                f"{out} is not empty. Continue the run there with --resume, or choose another folder with --out."
+            )
+        out.mkdir(parents=True, exist_ok=True)
+        (out / CONFIG).write_text(curriculum.to_yaml())
+        first = curriculum.stages[0]
+        settings = TrainSettings(
+            task=curriculum.task,
+            env=first.env.env_kwargs(),
+            seed=curriculum.seed,
+            envs=curriculum.envs,
+            eval_episodes=curriculum.eval.episodes,
+            learning_starts=curriculum.learning_starts,
+            object_slots=curriculum.max_objects,
+            stage=0,
+        )
+        trainer = Trainer(settings, curriculum.agent.settings(), device)
+        return cls(curriculum, out, trainer, RunState(), observer)
+
+    @classmethod
+    def resume(
+        cls,
+        out: Path,
+        curriculum: Curriculum | None = None,
+        device: str | torch.device = "cpu",
+        observer: RunObserver | None = None,
+    ) -> CurriculumRun:
+        """The run in ``out`` from its latest checkpoint. ``curriculum``, when given, must equal the one the
+        run was started with; a run continues with the plan it began with or not at all."""
+        config = out / CONFIG
+        if not config.is_file():
+            raise RunError(f"{out} holds no run to resume ({CONFIG} is missing); start one without --resume")
+        saved = load_curriculum(config)
+        if curriculum is not None:
+            changes = diff_curricula(saved, curriculum, f"{config} (the run's)", "the curriculum given now")
+            if changes:
+                raise RunError(
+                    "the curriculum differs from the one this run was started with, so it was not resumed. "
+                    "Resume with the same file and options, or start a new run with another --out.\n" + changes
+                )
+        try:
+            directory = read_pointer(out / LATEST)
+        except CheckpointError:
+            raise RunError(f"{out} has no checkpoint yet (the run stopped before its first one); start it again") from None
+        trainer, extra = Trainer.load(directory, device)
+        state = RunState.from_dict(extra["run"])
+        _truncate_metrics(out / METRICS, trainer.progress.env_steps)
+        return cls(saved, out, trainer, state, observer)
+
+    # -- running -----------------------------------------------------------------------------------------
+
+    def run(self, should_stop: Callable[[], bool] = lambda: False) -> bool:
+        """Train until the curriculum is done (True) or ``should_stop`` asks to stop (False, after writing a
+        checkpoint to resume from)."""
+        stages = self.curriculum.stages
+        every = self.curriculum.eval.every
+        while not self.state.finished:
+            stage = stages[self.state.stage]
+            start = self.state.stage_start
+            if self.state.evaluations == 0 and self.trainer.progress.env_steps == start:
+                self.observer.on_stage_start(self, stage)
+            used = self.trainer.progress.env_steps - start
+            target = start + min((used // every + 1) * every, stage.budget.steps)
+            if not self.trainer.run(target, should_stop, lambda _: self.observer.on_step(self)):
+                self._checkpoint(stage_index=self.state.stage, best=False)
+                return False
+            self._evaluate(stage)
+        return True
+
+    def _evaluate(self, stage: Stage) -> None:
+        trainer, state = self.trainer, self.state
+        index = state.stage
+        report = trainer.evaluate()
+        value = rule_value(stage, report)
+        holds = stage.promote is not None and value is not None and value >= stage.promote.success
+        state.passes = state.passes + 1 if holds else 0
+        state.evaluations += 1
+        improved = value is not None and (state.best is None or value > state.best)
+        if improved:
+            state.best = value
+        row = self._row(stage, report, holds)
+        _append_row(self.out / METRICS, row)
+        self._tensorboard.write(row)
+        self.observer.on_evaluation(self, row)
+
+        used = trainer.progress.env_steps - state.stage_start
+        promoted = stage.promote is not None and state.passes >= stage.promote.patience
+        result = None
+        if promoted or used >= stage.budget.steps:
+            result = StageResult(
+                index=index,
+                name=stage.name,
+                start=state.stage_start,
+                end=trainer.progress.env_steps,
+                ended="promoted" if promoted else "budget",
+                evaluations=state.evaluations,
+                success=report.overall.success,
+                correction_success=report.corrections.success if report.corrections.episodes else None,
+                best=state.best,
+                wall_time=trainer.wall_time(),
+            )
+            state.results.append(result)
+            stop = not promoted and stage.on_budget == "stop"
+            state.stopped_early = stop
+            state.finished = stop or index + 1 == len(self.curriculum.stages)
+            if not state.finished:
+                state.stage, state.stage_start, state.evaluations, state.passes, state.best = (
+                    index + 1, trainer.progress.env_steps, 0, 0, None
+                )
+        self._checkpoint(stage_index=index, best=improved)
+        if result is not None:
+            self._write_report()
+            self.observer.on_stage_end(self, result)
+            if not state.finished:
+                self._enter(state.stage)
+
+    def _enter(self, index: int) -> None:
+        self.trainer.enter_stage(self.curriculum.stages[index].env.env_kwargs(), index)
+
+    def _row(self, stage: Stage, report: EvaluationReport, holds: bool) -> dict[str, Any]:
+        progress = self.trainer.progress
+        by_kind = report.by_kind()
+        corrections = report.corrections
+        row: dict[str, Any] = {
+            "stage": self.state.stage + 1,
+            "stage_name": stage.name,
+            "env_steps": progress.env_steps,
+            "stage_steps": progress.env_steps - self.state.stage_start,
+            "wall_time": round(self.trainer.wall_time(), 1),
+            "success": report.overall.success,
+            "correction_success": corrections.success if corrections.episodes else "",
+            **{f"success_{k.value}": by_kind[k.value].success if k.value in by_kind else "" for k in Kind},
+            "mean_return": round(report.mean_return, 3),
+            "mean_length": round(report.mean_length, 2),
+            "train_success": "" if self.trainer.train_success is None else round(self.trainer.train_success, 3),
+            "rule_holds": int(holds),
+        }
+        for name in AGENT_METRICS:
+            value = self.trainer.last_metrics.get(name)
+            row[name] = "" if value is None else round(value, 5)
+        return row
+
+    # -- files ---------------------------------------------------------------------------------------------
+
+    def _checkpoint(self, stage_index: int, best: bool) -> None:
+        """A resumable checkpoint in the stage's folder (``last``, and the run's ``latest``), and, when the
+        evaluation just made was the stage's best, the agent alone as ``best``."""
+        folder = self.out / stage_folder(stage_index, self.curriculum.stages[stage_index])
+        steps = self.trainer.progress.env_steps
+        extra = {"run": self.state.to_dict()}
+        last = folder / f"step-{steps:010d}"
+        if not last.exists():  # an interruption right after an evaluation finds its checkpoint written
+            self.trainer.save(last, extra)
+        if best:
+            self.trainer.save(folder / f"best-{steps:010d}", extra, resumable=False)
+            write_pointer(folder / BEST, f"best-{steps:010d}")
+        write_pointer(folder / LAST, last.name)
+        write_pointer(self.out / LATEST, f"{folder.name}/{last.name}")
+        keep = {last}
+        if (folder / BEST).is_file():
+            keep.add(read_pointer(folder / BEST))
+        prune(folder, keep)
+
+    def _write_report(self) -> None:
+        (self.out / REPORT).write_text(render_report(self.curriculum, self.state))
+
+    def close(self) -> None:
+        self.trainer.close()
+        self._tensorboard.close()
+
+
+def _percent(value: float | None) -> str:
+    return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{100 * value:.0f}%"
+
+
+def render_report(curriculum: Curriculum, state: RunState) -> str:
+    """``report.md``: the plan's outcome per stage, in Markdown."""
+    lines = [
+        f"# {curriculum.name}: {curriculum.task}",
+        "",
+        f"Seed {curriculum.seed}, {curriculum.envs} environments, evaluation on {curriculum.eval.episodes} "
+        f"episodes every {curriculum.eval.every} steps.",
+        "",
+        "| stage | rule | steps | ended | evaluations | success | corrections | best | wall time |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for result in state.results:
+        stage = curriculum.stages[result.index]
+        rule = f"{stage.promote.on} >= {stage.promote.success:g} x{stage.promote.patience}" if stage.promote else "-"
+        lines.append(
+            f"| {result.index + 1}. {result.name} | {rule} | {result.end - result.start:,} of "
+            f"{stage.budget.steps:,} | {result.ended} | {result.evaluations} | {_percent(result.success)} | "
+            f"{_percent(result.correction_success)} | {_percent(result.best)} | {result.wall_time / 60:.1f} min |"
+        )
+    total = state.results[-1].end if state.results else 0
+    status = "finished" if state.finished else "running"
+    if state.stopped_early:
+        status = "stopped: a budget ran out with on_budget: stop"
+    lines += ["", f"Status: {status}. {total:,} environment steps in all."]
+    return "\n".join(lines) + "\n"
+
+
+def _append_row(path: Path, row: dict[str, Any]) -> None:
+    new = not path.exists()
+    with open(path, "a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=METRIC_COLUMNS)
+        if new:
+            writer.writeheader()
+        writer.writerow(row)
+
+
+def _truncate_metrics(path: Path, env_steps: int) -> None:
+    """Drop rows written after the checkpoint a run resumes from: the resumed run writes them again."""
+    if not path.is_file():
+        return
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    kept = [r for r in rows if int(r["env_steps"]) <= env_steps]
+    if len(kept) == len(rows):
+        return
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=METRIC_COLUMNS)
+        writer.writeheader()
+        writer.writerows(kept)
+    tmp.replace(path)
+
+
+class _TensorBoard:
+    """Evaluation scalars as TensorBoard events when the optional ``tensorboard`` package is installed."""
+
+    def __init__(self, writer: Any) -> None:
+        self._writer = writer
+
+    @classmethod
+    def open(cls, out: Path, purge_step: int) -> _TensorBoard:
+        try:
+            from torch.utils.tensorboard import SummaryWriter
+        except ImportError:
+            return cls(None)
+        # purge_step drops events a killed run wrote after the checkpoint it resumes from.
+        return cls(SummaryWriter(str(out), purge_step=purge_step or None))
+
+    def write(self, row: dict[str, Any]) -> None:
+        if self._writer is None:
+            return
+        for name, value in row.items():
+            if isinstance(value, (int, float)) and name != "env_steps":
+                self._writer.add_scalar(f"eval/{name}", value, row["env_steps"])
+        self._writer.flush()
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()

@@ -1,0 +1,380 @@
+"""Curriculum files: defaults, located error messages (path and line), extends, and the derived plans."""
+
+from __future__ import annotations
+
+import typing
+from pathlib import Path
+
+import pytest
+
+from lanrocli.agent import SACSettings
+from lanrocli.envs import Kind, Mode
+from lanrocli.language import TASKS
+from lanrocli.train.curriculum import (
+    Curriculum,
+    CurriculumError,
+    EnvConfig,
+    KindName,
+    Problem,
+    TaskName,
+    builtin_curriculum,
+    diff_curricula,
+    load_curriculum,
+)
+
+MINIMAL = """\
+name: demo
+task: push
+stages:
+  - name: first
+    budget: {steps: 1000}
+"""
+
+
+def write(directory: Path, name: str, text: str) -> Path:
+    path = directory / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def problems_of(path: Path) -> list[Problem]:
+    with pytest.raises(CurriculumError) as caught:
+        load_curriculum(path)
+    return caught.value.problems
+
+
+def only_problem(path: Path) -> Problem:
+    problems = problems_of(path)
+    assert len(problems) == 1, problems
+    return problems[0]
+
+
+def test_valid_file_loads_with_defaults(tmp_path: Path) -> None:
+    curriculum = load_curriculum(write(tmp_path, "c.yaml", MINIMAL))
+    assert (curriculum.name, curriculum.task, curriculum.seed, curriculum.envs) == ("demo", "push", 0, 2)
+    assert curriculum.learning_starts == 1000
+    assert (curriculum.eval.every, curriculum.eval.episodes) == (10_000, 50)
+    assert curriculum.agent.settings() == SACSettings()
+    stage = curriculum.stages[0]
+    assert stage.env == EnvConfig()
+    assert (stage.env.objects, stage.env.mode, stage.env.correction_rate, stage.env.kinds) == (2, "color", 0.0, None)
+    assert (stage.budget.steps, stage.promote, stage.on_budget) == (1000, None, "advance")
+    assert (curriculum.max_objects, curriculum.total_steps) == (2, 1000)
+
+
+def test_env_kwargs_leave_environment_defaults_to_the_environment() -> None:
+    kwargs = EnvConfig(objects=3, correction_rate=0.5, kinds=["ambiguity"]).env_kwargs()
+    assert kwargs == {
+        "objects": 3,
+        "mode": "color",
+        "correction_rate": 0.5,
+        "negations": False,
+        "max_delay": 0,
+        "rare_words": False,
+        "kinds": ["ambiguity"],
+    }
+
+
+def test_literals_match_the_environment_and_language() -> None:
+    assert set(typing.get_args(KindName)) == {kind.value for kind in Kind}
+    assert set(typing.get_args(TaskName)) == set(TASKS)
+    assert set(typing.get_args(EnvConfig.model_fields["mode"].annotation)) == {mode.value for mode in Mode}
+
+
+def test_unknown_key_suggests_the_closest_field(tmp_path: Path) -> None:
+    text = MINIMAL.replace("    budget:", "    env:\n      corection_rate: 0.5\n    budget:")
+    problem = only_problem(write(tmp_path, "c.yaml", text))
+    assert (problem.line, problem.path) == (6, "stages[0].env.corection_rate")
+    assert problem.message == "unknown key 'corection_rate'; did you mean 'correction_rate'?"
+
+
+def test_unknown_key_without_a_close_field_has_no_suggestion(tmp_path: Path) -> None:
+    problem = only_problem(write(tmp_path, "c.yaml", MINIMAL + "zzzz: 1\n"))
+    assert (problem.line, problem.path, problem.message) == (6, "zzzz", "unknown key 'zzzz'")
+
+
+def test_wrong_type_is_located(tmp_path: Path) -> None:
+    problem = only_problem(write(tmp_path, "c.yaml", MINIMAL.replace("task: push", "task: push\nseed: many")))
+    assert (problem.line, problem.path) == (3, "seed")
+    assert "integer" in problem.message and "'many'" in problem.message
+
+
+def test_out_of_range_value_in_second_stage(tmp_path: Path) -> None:
+    text = MINIMAL + "  - name: second\n    env:\n      correction_rate: 1.5\n    budget: {steps: 10}\n"
+    path = write(tmp_path, "c.yaml", text)
+    problem = only_problem(path)
+    assert (problem.file, problem.line, problem.path) == (path, 8, "stages[1].env.correction_rate")
+    assert "less than or equal to 1" in problem.message
+    assert str(problem) == f"{path}:8: stages[1].env.correction_rate: {problem.message}"
+
+
+def test_empty_stage_list(tmp_path: Path) -> None:
+    problem = only_problem(write(tmp_path, "c.yaml", "name: demo\ntask: push\nstages: []\n"))
+    assert (problem.line, problem.path, problem.message) == (3, "stages", "a curriculum needs at least one stage")
+
+
+def test_unknown_task_lists_the_allowed_ones(tmp_path: Path) -> None:
+    problem = only_problem(write(tmp_path, "c.yaml", MINIMAL.replace("task: push", "task: fly")))
+    assert (problem.line, problem.path) == (2, "task")
+    assert all(f"'{task}'" in problem.message for task in TASKS)
+
+
+def test_promote_on_corrections_needs_corrections(tmp_path: Path) -> None:
+    text = MINIMAL + "    promote:\n      success: 0.8\n      on: corrections\n"
+    problem = only_problem(write(tmp_path, "c.yaml", text))
+    assert (problem.line, problem.path) == (6, "stages[0].promote")
+    assert "correction_rate > 0" in problem.message
+
+
+def test_promote_on_corrections_with_corrections_loads(tmp_path: Path) -> None:
+    text = MINIMAL + "    env: {correction_rate: 0.5}\n    promote: {success: 0.8, on: corrections, patience: 2}\n"
+    promote = load_curriculum(write(tmp_path, "c.yaml", text)).stages[0].promote
+    assert promote is not None
+    assert (promote.success, promote.on, promote.patience) == (0.8, "corrections", 2)
+
+
+def test_common_ground_needs_rare_words(tmp_path: Path) -> None:
+    text = MINIMAL + "    env: {correction_rate: 0.5, kinds: [common_ground]}\n"
+    problem = only_problem(write(tmp_path, "c.yaml", text))
+    assert (problem.line, problem.path) == (6, "stages[0].env")
+    assert "rare_words" in problem.message
+    load_curriculum(write(tmp_path, "ok.yaml", text.replace("kinds:", "rare_words: true, kinds:")))
+
+
+def test_kinds_must_be_distinct_and_not_empty(tmp_path: Path) -> None:
+    repeated = only_problem(write(tmp_path, "a.yaml", MINIMAL + "    env: {kinds: [ambiguity, ambiguity]}\n"))
+    assert (repeated.line, repeated.path) == (6, "stages[0].env.kinds")
+    assert "ambiguity more than once" in repeated.message
+    empty = only_problem(write(tmp_path, "b.yaml", MINIMAL + "    env: {kinds: []}\n"))
+    assert (empty.path, empty.message.startswith("kinds must name at least one kind")) == ("stages[0].env.kinds", True)
+
+
+def test_duplicate_stage_names(tmp_path: Path) -> None:
+    text = MINIMAL + "  - name: other\n    budget: {steps: 5}\n  - name: first\n    budget: {steps: 5}\n"
+    problem = only_problem(write(tmp_path, "c.yaml", text))
+    assert (problem.line, problem.path) == (3, "stages")
+    assert "stages[0] and stages[2] are both named 'first'" in problem.message
+
+
+def test_stage_name_must_be_usable_as_a_folder(tmp_path: Path) -> None:
+    problem = only_problem(write(tmp_path, "c.yaml", MINIMAL.replace("name: first", "name: ../up")))
+    assert (problem.line, problem.path) == (4, "stages[0].name")
+
+
+def test_bad_agent_setting_reports_the_agents_own_check(tmp_path: Path) -> None:
+    problem = only_problem(write(tmp_path, "c.yaml", MINIMAL + "agent: {critics: 3}\n"))
+    assert (problem.line, problem.path, problem.message) == (6, "agent", "critics must be 1 or 2, got 3")
+
+
+def test_unknown_agent_key(tmp_path: Path) -> None:
+    problem = only_problem(write(tmp_path, "c.yaml", MINIMAL + "agent:\n  batch_size: 64\n  critic: 2\n"))
+    assert (problem.line, problem.path) == (8, "agent.critic")
+    assert problem.message == "unknown key 'critic'; did you mean 'critics'?"
+
+
+def test_missing_keys_are_reported_at_their_parent(tmp_path: Path) -> None:
+    path = write(tmp_path, "c.yaml", "name: demo\nstages:\n  - name: first\n")
+    problems = {problem.path: problem for problem in problems_of(path)}
+    assert set(problems) == {"task", "stages[0].budget"}
+    assert problems["task"].line is None and str(problems["task"]) == f"{path}: task: required key is missing"
+    assert problems["stages[0].budget"].line == 3
+
+
+def test_every_problem_is_reported_at_once(tmp_path: Path) -> None:
+    text = """\
+name: demo
+task: fly
+seed: -1
+agent: {actor_lr: fast}
+stages:
+  - name: first
+    env: {objects: 4, mode: colour}
+    budget: {steps: 0}
+    on_budget: pause
+"""
+    path = write(tmp_path, "c.yaml", text)
+    with pytest.raises(CurriculumError) as caught:
+        load_curriculum(path)
+    located = {(problem.line, problem.path) for problem in caught.value.problems}
+    assert located == {
+        (2, "task"),
+        (3, "seed"),
+        (4, "agent.actor_lr"),
+        (7, "stages[0].env.objects"),
+        (7, "stages[0].env.mode"),
+        (8, "stages[0].budget.steps"),
+        (9, "stages[0].on_budget"),
+    }
+    lines = str(caught.value).splitlines()
+    assert len(lines) == 7 and all(line.startswith(f"{path}:") for line in lines)
+
+
+def test_yaml_syntax_error_has_its_line(tmp_path: Path) -> None:
+    problem = only_problem(write(tmp_path, "c.yaml", "name: demo\ntask: push\nstages: [\n  {name: a\n"))
+    assert problem.file == tmp_path / "c.yaml" and problem.line is not None and problem.line >= 4
+    assert problem.message.startswith("invalid YAML")
+
+
+def test_top_level_must_be_a_mapping(tmp_path: Path) -> None:
+    problem = only_problem(write(tmp_path, "c.yaml", "- name: a\n"))
+    assert "top level must be a mapping" in problem.message
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    problem = only_problem(tmp_path / "absent.yaml")
+    assert (problem.file, problem.message) == (tmp_path / "absent.yaml", "no such file")
+
+
+def test_yaml_on_key_is_a_string_not_a_boolean(tmp_path: Path) -> None:
+    text = MINIMAL + "    env: {correction_rate: 0.5}\n    promote:\n      success: 0.5\n      on: corrections\n"
+    promote = load_curriculum(write(tmp_path, "c.yaml", text)).stages[0].promote
+    assert promote is not None and promote.on == "corrections"
+
+
+def test_exponent_float_loads_as_float(tmp_path: Path) -> None:
+    curriculum = load_curriculum(write(tmp_path, "c.yaml", MINIMAL + "agent: {actor_lr: 1e-3}\n"))
+    assert curriculum.agent.actor_lr == 0.001 and isinstance(curriculum.agent.actor_lr, float)
+    assert curriculum.agent.settings().actor_lr == 0.001
+
+
+BASE = """\
+name: base
+task: push
+envs: 4
+agent:
+  batch_size: 64
+  critics: 2
+eval: {every: 2000, episodes: 10}
+stages:
+  - name: a
+    budget: {steps: 100}
+  - name: b
+    budget: {steps: 200}
+"""
+
+
+def test_extends_merges_mappings_and_replaces_lists(tmp_path: Path) -> None:
+    write(tmp_path, "base.yaml", BASE)
+    child = """\
+extends: base.yaml
+name: child
+agent: {batch_size: 128}
+stages:
+  - name: only
+    budget: {steps: 300}
+"""
+    curriculum = load_curriculum(write(tmp_path, "child.yaml", child))
+    assert (curriculum.name, curriculum.task, curriculum.envs) == ("child", "push", 4)
+    assert (curriculum.agent.batch_size, curriculum.agent.critics) == (128, 2)
+    assert (curriculum.eval.every, curriculum.eval.episodes) == (2000, 10)
+    assert [stage.name for stage in curriculum.stages] == ["only"]
+
+
+def test_extends_chain_of_two(tmp_path: Path) -> None:
+    write(tmp_path, "base.yaml", BASE)
+    write(tmp_path, "middle.yaml", "extends: base.yaml\neval: {episodes: 3}\nagent: {critics: 1}\n")
+    curriculum = load_curriculum(write(tmp_path, "top.yaml", "extends: middle.yaml\nseed: 7\nagent: {batch_size: 32}\n"))
+    assert (curriculum.seed, curriculum.eval.every, curriculum.eval.episodes) == (7, 2000, 3)
+    assert (curriculum.agent.batch_size, curriculum.agent.critics) == (32, 1)
+    assert [stage.name for stage in curriculum.stages] == ["a", "b"]
+
+
+def test_extends_is_relative_to_the_extending_file(tmp_path: Path) -> None:
+    write(tmp_path, "base.yaml", BASE)
+    curriculum = load_curriculum(write(tmp_path, "sub/child.yaml", "extends: ../base.yaml\nseed: 5\n"))
+    assert (curriculum.name, curriculum.seed) == ("base", 5)
+
+
+def test_extends_errors_point_into_the_file_that_holds_the_key(tmp_path: Path) -> None:
+    base = write(tmp_path, "base.yaml", BASE.replace("critics: 2", "critics: 5"))
+    child = write(tmp_path, "child.yaml", "extends: base.yaml\n\nstages:\n  - name: x\n  - name: y\n")
+    problems = {problem.path: problem for problem in problems_of(child)}
+    assert set(problems) == {"agent", "stages[0].budget", "stages[1].budget"}
+    assert (problems["agent"].file, problems["agent"].line) == (base, 4)
+    # The child replaced the parent's stages, budgets included: a missing budget is reported at the child's
+    # stage, not at the budget of the parent's stage that happened to sit at the same index.
+    assert (problems["stages[0].budget"].file, problems["stages[0].budget"].line) == (child, 4)
+    assert (problems["stages[1].budget"].file, problems["stages[1].budget"].line) == (child, 5)
+
+
+def test_extends_cycle_is_an_error(tmp_path: Path) -> None:
+    write(tmp_path, "a.yaml", "extends: b.yaml\nname: a\n")
+    b = write(tmp_path, "b.yaml", "name: b\nextends: a.yaml\n")
+    problem = only_problem(tmp_path / "a.yaml")
+    assert (problem.file, problem.line, problem.path) == (b, 2, "extends")
+    assert "cycle" in problem.message and "a.yaml" in problem.message
+
+
+def test_extends_missing_file_names_it(tmp_path: Path) -> None:
+    child = write(tmp_path, "child.yaml", "name: c\nextends: nowhere.yaml\n")
+    problem = only_problem(child)
+    assert (problem.file, problem.line, problem.path) == (child, 2, "extends")
+    assert "nowhere.yaml" in problem.message and "no such file" in problem.message
+
+
+def test_to_yaml_round_trips(tmp_path: Path) -> None:
+    text = MINIMAL + """\
+    env: {objects: 3, correction_rate: 0.25, kinds: [wrong_object, ambiguity], max_episode_steps: 80}
+    promote: {success: 0.6, on: corrections, patience: 3}
+    on_budget: stop
+agent: {actor_lr: 3e-4, max_grad_norm: 1.0}
+"""
+    curriculum = load_curriculum(write(tmp_path, "c.yaml", text))
+    again = load_curriculum(write(tmp_path, "plan.yaml", curriculum.to_yaml()))
+    assert again == curriculum
+    assert again.stages[0].env.kinds == ["wrong_object", "ambiguity"]
+
+
+def test_quick_caps_budgets_and_evaluation(tmp_path: Path) -> None:
+    text = BASE.replace("steps: 100", "steps: 50000").replace("steps: 200", "steps: 1000")
+    curriculum = load_curriculum(write(tmp_path, "c.yaml", text + "learning_starts: 5000\n"))
+    quick = curriculum.quick()
+    assert quick.name == "base-quick"
+    assert [stage.budget.steps for stage in quick.stages] == [1500, 1000]
+    assert (quick.eval.every, quick.eval.episodes, quick.learning_starts) == (500, 5, 256)
+    assert quick.agent.buffer_size == 100_000 and quick.agent.batch_size == 64
+    assert curriculum.stages[0].budget.steps == 50000  # the original is untouched
+
+
+def test_with_overrides(tmp_path: Path) -> None:
+    curriculum = load_curriculum(write(tmp_path, "c.yaml", MINIMAL))
+    assert (curriculum.with_overrides(seed=9).seed, curriculum.with_overrides(seed=9).envs) == (9, 2)
+    assert curriculum.with_overrides(envs=8).envs == 8
+    with pytest.raises(CurriculumError) as caught:
+        curriculum.with_overrides(envs=100)
+    assert [problem.path for problem in caught.value.problems] == ["envs"]
+
+
+def test_builtin_curriculum() -> None:
+    curriculum = builtin_curriculum()
+    assert [stage.name for stage in curriculum.stages] == ["single", "corrections", "negations"]
+    assert (curriculum.name, curriculum.task, curriculum.max_objects, curriculum.total_steps) == ("reach-basics", "reach", 3, 4500)
+    assert (curriculum.eval.every, curriculum.eval.episodes, curriculum.learning_starts, curriculum.envs) == (500, 5, 256, 2)
+    single, corrections, negations = curriculum.stages
+    assert single.promote is not None and (single.promote.success, single.promote.on) == (0.9, "overall")
+    assert corrections.promote is not None and (corrections.promote.success, corrections.promote.on) == (
+        0.7,
+        "corrections",
+    )
+    assert (corrections.env.correction_rate, corrections.env.max_delay) == (0.5, 5)
+    assert (negations.env.objects, negations.env.mode, negations.env.negations, negations.promote) == (
+        3,
+        "color_shape",
+        True,
+        None,
+    )
+
+
+def test_diff_curricula(tmp_path: Path) -> None:
+    old = load_curriculum(write(tmp_path, "c.yaml", MINIMAL))
+    assert diff_curricula(old, old.model_copy(), "saved", "file") == ""
+    new = load_curriculum(write(tmp_path, "d.yaml", MINIMAL.replace("steps: 1000", "steps: 2000")))
+    diff = diff_curricula(old, new, "saved", "file")
+    assert "--- saved" in diff and "+++ file" in diff
+    assert "-    steps: 1000\n" in diff and "+    steps: 2000\n" in diff
+
+
+def test_curriculum_model_is_usable_without_a_file() -> None:
+    curriculum = Curriculum.model_validate({"name": "x", "task": "lift", "stages": [{"name": "s", "budget": {"steps": 1}}]})
+    assert curriculum.stages[0].env.objects == 2

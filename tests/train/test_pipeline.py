@@ -1,0 +1,200 @@
+"""Curriculum runs: promotion rules, budgets, the run folder, and resuming after SIGINT and SIGKILL."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from lanrocli.envs.evaluation import EpisodeResult, EvaluationReport
+from lanrocli.train.checkpoint import LATEST, read_pointer, resolve_checkpoint
+from lanrocli.train.curriculum import Curriculum, load_curriculum
+from lanrocli.train.pipeline import CONFIG, METRICS, REPORT, CurriculumRun, RunError, RunState
+
+TINY = """\
+name: tiny
+task: reach
+seed: 5
+envs: {envs}
+learning_starts: 40
+agent: {{batch_size: 16, buffer_size: 4000}}
+eval: {{every: 40, episodes: 2}}
+stages:
+  - name: first
+    env: {{objects: 2, max_episode_steps: 15}}
+    budget: {{steps: 80}}
+    promote: {{success: 1.0}}
+  - name: second
+    env: {{objects: 2, correction_rate: 0.5, max_episode_steps: 20}}
+    budget: {{steps: 80}}
+  - name: third
+    env: {{objects: 3, mode: color_shape, correction_rate: 0.5, negations: true, max_episode_steps: 20}}
+    budget: {{steps: 80}}
+"""
+
+
+def tiny(tmp_path: Path, envs: int = 1) -> Path:
+    path = tmp_path / "tiny.yaml"
+    path.write_text(TINY.format(envs=envs))
+    return path
+
+
+def report(successes: list[bool], corrected: list[bool] | None = None) -> EvaluationReport:
+    corrected = corrected or [False] * len(successes)
+    return EvaluationReport(
+        [
+            EpisodeResult(success=s, length=5, challenge="wrong_object" if c else None, corrected=c, negation=False,
+                          returned=-4.0)
+            for s, c in zip(successes, corrected)
+        ]
+    )
+
+
+def scripted(run: CurriculumRun, reports: Iterator[EvaluationReport]) -> None:
+    """Replace the run's evaluations by ``reports``, in order, so the test decides what the rule sees."""
+    run.trainer.evaluate = lambda episodes=None: next(reports)  # type: ignore[method-assign]
+
+
+def rows(out: Path) -> list[dict[str, str]]:
+    with open(out / METRICS, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_promotion_happens_exactly_when_the_rule_holds_for_patience_evaluations(tmp_path: Path) -> None:
+    plan = load_curriculum(tiny(tmp_path))
+    data = plan.model_dump()
+    data["stages"][0]["budget"]["steps"] = 400
+    data["stages"][0]["promote"] = {"success": 0.5, "on": "overall", "patience": 2}
+    plan = Curriculum.model_validate(data)
+    run = CurriculumRun.start(plan, tmp_path / "run")
+    # Evaluations of stage 1: 0.5 holds, 0.0 breaks the streak, then 0.5 and 1.0 hold twice in a row.
+    stage_one = [report([True, False]), report([False, False]), report([True, False]), report([True, True])]
+    rest = [report([False, False], [True, False])] * 4
+    scripted(run, iter(stage_one + rest))
+    assert run.run()
+    run.close()
+    first = [r for r in rows(tmp_path / "run") if r["stage_name"] == "first"]
+    assert [r["rule_holds"] for r in first] == ["1", "0", "1", "1"]
+    assert [int(r["env_steps"]) for r in first] == [40, 80, 120, 160]
+    result = run.state.results[0]
+    assert (result.ended, result.end, result.evaluations, result.best) == ("promoted", 160, 4, 1.0)
+    # The next stage starts where the first ended and is evaluated from its own start.
+    second = [int(r["stage_steps"]) for r in rows(tmp_path / "run") if r["stage_name"] == "second"]
+    assert second == [40, 80]
+
+
+def test_a_rule_on_corrections_ignores_plain_episodes(tmp_path: Path) -> None:
+    data = load_curriculum(tiny(tmp_path)).model_dump()
+    data["stages"] = [data["stages"][1]]
+    data["stages"][0]["promote"] = {"success": 1.0, "on": "corrections"}
+    run = CurriculumRun.start(Curriculum.model_validate(data), tmp_path / "run")
+    # All plain episodes succeed but the correction episode fails: no promotion; then the correction succeeds.
+    scripted(run, iter([report([True, False], [False, True]), report([False, True], [False, True])]))
+    assert run.run()
+    run.close()
+    assert [r["rule_holds"] for r in rows(tmp_path / "run")] == ["0", "1"]
+    assert run.state.results[0].ended == "promoted"
+
+
+def test_on_budget_stop_ends_the_run_and_the_report_says_so(tmp_path: Path) -> None:
+    data = load_curriculum(tiny(tmp_path)).model_dump()
+    data["stages"][0]["on_budget"] = "stop"
+    run = CurriculumRun.start(Curriculum.model_validate(data), tmp_path / "run")
+    scripted(run, iter([report([False, False])] * 2))
+    assert run.run()
+    run.close()
+    assert run.state.finished and run.state.stopped_early
+    assert [r.name for r in run.state.results] == ["first"]
+    assert "on_budget: stop" in (tmp_path / "run" / REPORT).read_text()
+
+
+def test_the_run_folder_has_every_file(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    run = CurriculumRun.start(load_curriculum(tiny(tmp_path)), out)
+    assert run.run()
+    run.close()
+    assert load_curriculum(out / CONFIG) == load_curriculum(tiny(tmp_path))
+    assert [r["stage_name"] for r in rows(out)] == ["first"] * 2 + ["second"] * 2 + ["third"] * 2
+    for index, name in enumerate(["first", "second", "third"], start=1):
+        folder = out / f"stage-{index}-{name}"
+        last, best = read_pointer(folder / "last"), read_pointer(folder / "best")
+        assert (last / "buffer.npz").is_file() and (best / "agent.pt").is_file()
+        assert {p.name for p in folder.iterdir() if p.is_dir()} == {last.name, best.name}
+    assert resolve_checkpoint(out) == read_pointer(out / "stage-3-third" / "last")
+    table = (out / REPORT).read_text()
+    assert "| 1. first | overall >= 1 x1 | 80 of 80 | budget |" in table and "Status: finished" in table
+
+
+def test_starting_into_a_used_folder_is_refused(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(RunError, match="not empty.*--resume"):
+        CurriculumRun.start(load_curriculum(tiny(tmp_path)), out)
+    assert (out / "notes.txt").read_text() == "mine"
+
+
+def test_resume_with_a_changed_curriculum_is_refused_with_the_difference(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    path = tiny(tmp_path)
+    run = CurriculumRun.start(load_curriculum(path), out)
+    run.run(should_stop=lambda: run.trainer.progress.env_steps >= 50)
+    run.close()
+    path.write_text(path.read_text().replace("budget: {steps: 80}\n  - name: third", "budget: {steps: 90}\n  - name: third"))
+    with pytest.raises(RunError, match="differs") as error:
+        CurriculumRun.resume(out, load_curriculum(path))
+    assert "-    steps: 80" in str(error.value) and "+    steps: 90" in str(error.value)
+
+
+def train(args: list[str], cwd: Path) -> subprocess.Popen[str]:
+    # A new session, so a signal can go to the whole process group as a terminal's Ctrl-C does.
+    return subprocess.Popen(
+        [sys.executable, "-c", "from lanrocli.cli import app; app()", "train", *args],
+        cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
+    )
+
+
+def wait_for_rows(out: Path, n: int, process: subprocess.Popen[str]) -> None:
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and process.poll() is None:
+        if (out / METRICS).is_file() and len(rows(out)) >= n:
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"the run ended or stalled before {n} evaluations")
+
+
+def outcome(out: Path) -> tuple[list[dict[str, str]], list[tuple[str, int, int, str]]]:
+    """Everything a run produced that must not depend on interruptions (wall time aside)."""
+    metrics = [{k: v for k, v in r.items() if k != "wall_time"} for r in rows(out)]
+    state = RunState.from_dict(__import__("json").loads((read_pointer(out / LATEST) / "state.json").read_text())["extra"]["run"])
+    stages = [(r.name, r.start, r.end, r.ended) for r in state.results]
+    return metrics, stages
+
+
+@pytest.mark.parametrize("how", [signal.SIGINT, signal.SIGKILL])
+def test_interrupted_runs_resume_to_the_same_result(tmp_path: Path, how: signal.Signals) -> None:
+    path = tiny(tmp_path, envs=2)
+    straight = train([str(path), "--out", "straight"], tmp_path)
+    assert straight.wait(timeout=300) == 0, straight.stdout.read() if straight.stdout else ""
+
+    process = train([str(path), "--out", "cut"], tmp_path)
+    wait_for_rows(tmp_path / "cut", 3, process)  # inside the second stage
+    os.killpg(process.pid, how)
+    output = process.communicate(timeout=120)[0]
+    if how is signal.SIGINT:
+        assert process.returncode == 130, output
+        assert f"lanro train {path} --out cut --resume" in output
+    else:
+        assert process.returncode == -signal.SIGKILL
+    resumed = train([str(path), "--out", "cut", "--resume"], tmp_path)
+    assert resumed.wait(timeout=300) == 0, resumed.stdout.read() if resumed.stdout else ""
+
+    assert outcome(tmp_path / "cut") == outcome(tmp_path / "straight")
+    assert [s[0] for s in outcome(tmp_path / "cut")[1]] == ["first", "second", "third"]
