@@ -274,7 +274,8 @@ def _load_agent_policy(
     try:
         directory = resolve_checkpoint(path)
         settings = TrainSettings(**load_state(directory)["train_settings"])
-        agent = SACAgent.from_state_dict(load_agent_state(directory, pick_device(device)), pick_device(device))
+        torch_device = pick_device(device)
+        agent = SACAgent.from_state_dict(load_agent_state(directory, torch_device), torch_device)
     except (CheckpointError, ValueError, KeyError) as error:
         raise fail(f"cannot load a trained agent from {path}: {error}") from None
     if task is not None and task.value != settings.task:

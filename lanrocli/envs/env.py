@@ -114,6 +114,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._start_positions = np.zeros((objects, 3))
         self._heights = np.zeros(objects)
         self._properties = np.zeros((objects, len(COLOURS) + len(SHAPES)), dtype=np.float32)
+        self._empty_slots = np.zeros((slots - objects) * OBJECT_SIZE)
         self._tokens = np.zeros(self.vocabulary.max_length, dtype=np.int64)
         self._achieved = np.zeros(objects, dtype=bool)
         self._object_words: tuple[tuple[str, str], ...] = ()
@@ -200,9 +201,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             ],
             axis=1,
         )
-        empty = np.zeros((self.object_slots - self.n_objects) * OBJECT_SIZE)
         observation = np.concatenate(
-            [robot.ee_position, robot.ee_velocity, [robot.finger_width], per_object.ravel(), empty]
+            [robot.ee_position, robot.ee_velocity, [robot.finger_width], per_object.ravel(), self._empty_slots]
         ).astype(np.float32)
         return {"observation": observation, "instruction": self._tokens.copy()}
 

@@ -68,7 +68,7 @@ def resolve_checkpoint(path: Path) -> Path:
         return path
     if path.is_dir() and (path / LATEST).is_file():
         return resolve_checkpoint(read_pointer(path / LATEST))
-    if path.is_file() and path.stat().st_size < 4096:
+    if path.is_file():
         return resolve_checkpoint(read_pointer(path))
     if not path.exists():
         raise CheckpointError(f"{path} does not exist")

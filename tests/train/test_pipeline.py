@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import os
 import signal
 import subprocess
@@ -173,7 +174,8 @@ def wait_for_rows(out: Path, n: int, process: subprocess.Popen[str]) -> None:
 def outcome(out: Path) -> tuple[list[dict[str, str]], list[tuple[str, int, int, str]]]:
     """Everything a run produced that must not depend on interruptions (wall time aside)."""
     metrics = [{k: v for k, v in r.items() if k != "wall_time"} for r in rows(out)]
-    state = RunState.from_dict(__import__("json").loads((read_pointer(out / LATEST) / "state.json").read_text())["extra"]["run"])
+    saved = json.loads((read_pointer(out / LATEST) / "state.json").read_text())
+    state = RunState.from_dict(saved["extra"]["run"])
     stages = [(r.name, r.start, r.end, r.ended) for r in state.results]
     return metrics, stages
 
