@@ -145,6 +145,7 @@ class ReplayBuffer:
         self.high = 0  # one past the highest slot ever written: samples are drawn below it
         self.size = 0  # valid transitions
         self.episodes_added = 0
+        self._relabelable: np.ndarray | None = None  # slots relabelling can turn into successes; None: stale
         layout = _layout(obs_dim, action_dim, max_objects, vocabulary.max_length)
         self.data: dict[str, np.ndarray] = {
             name: np.zeros((capacity, *shape), dtype=dtype) for name, (dtype, shape) in layout.items()
@@ -209,6 +210,7 @@ class ReplayBuffer:
         d["future_count"][lo:hi] = achieving.size - first
 
         d["valid"][lo:hi] = True
+        self._relabelable = None
         self.size += steps
         self.position = hi
         self.high = max(self.high, hi)
@@ -258,8 +260,11 @@ class ReplayBuffer:
         rng: np.random.Generator,
         relabel_ratio: float = 0.0,
         correction_share: float = 0.0,
+        hindsight_share: float = 0.0,
     ) -> Batch:
-        """``batch_size`` transitions drawn uniformly from the stored ones (with replacement).
+        """``batch_size`` transitions drawn with replacement: a share ``hindsight_share`` (binomially) from
+        the transitions whose episode achieves the task on an identifiable object at that step or later, the
+        rest uniformly from all stored ones.
 
         With probability ``relabel_ratio`` a transition whose episode later achieves the task on an
         identifiable object gets a sentence for such an object: a step t' is drawn uniformly among the
@@ -270,7 +275,7 @@ class ReplayBuffer:
         if self.size == 0:
             raise ValueError("cannot sample from an empty replay buffer")
         d = self.data
-        idx = self._draw_valid(batch_size, rng)
+        idx = self._draw(batch_size, rng, hindsight_share)
         instruction = d["instruction"][idx].astype(np.int64)
         next_instruction = d["next_instruction"][idx].astype(np.int64)
         reward = d["reward"][idx]
@@ -304,6 +309,14 @@ class ReplayBuffer:
             relabelled=relabel,
             slots=idx,
         )
+
+    def _draw(self, batch_size: int, rng: np.random.Generator, hindsight_share: float) -> np.ndarray:
+        if self._relabelable is None:
+            high = self.high
+            self._relabelable = np.flatnonzero(self.data["valid"][:high] & (self.data["future_count"][:high] > 0))
+        n_hindsight = rng.binomial(batch_size, hindsight_share) if self._relabelable.size and hindsight_share else 0
+        hindsight = self._relabelable[rng.integers(0, self._relabelable.size, size=n_hindsight)]
+        return np.concatenate([hindsight, self._draw_valid(batch_size - n_hindsight, rng)])
 
     def _draw_valid(self, batch_size: int, rng: np.random.Generator) -> np.ndarray:
         """Uniform slots among the valid ones, by rejection: invalid slots are at most a tail and a

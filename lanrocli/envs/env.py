@@ -17,8 +17,9 @@ from lanrocli.sim import OBJECT_AREA, SHAPES as SIM_SHAPES, ObjectSet, Panda, Wo
 ARM_SIZE = 7
 """End-effector position (3), its linear velocity (3), finger width (1)."""
 
-OBJECT_SIZE = 3 + 4 + 3 + 3 + len(COLOURS) + len(SHAPES)
-"""Per object: position (3), quaternion x y z w (4), linear (3) and angular (3) velocity, one-hot colour and shape."""
+OBJECT_SIZE = 3 + 3 + 3 + 4 + 3 + 3 + len(COLOURS) + len(SHAPES)
+"""Per object: position (3), position relative to the end effector (3), displacement since the episode
+began (3), quaternion x y z w (4), linear (3) and angular (3) velocity, one-hot colour and shape."""
 
 PLAIN_LIMIT = 50
 CORRECTION_LIMIT = 100
@@ -35,14 +36,22 @@ def observation_size(n_objects: int) -> int:
 class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     """A Panda on a table with 2 or 3 objects and an instructor that speaks, watches and corrects.
 
-    Observation ``{"observation": float32[N], "instruction": int64[L]}`` with N = 7 + 25 ``object_slots``
+    Observation ``{"observation": float32[N], "instruction": int64[L]}`` with N = 7 + 31 ``object_slots``
     (by default the number of objects; a curriculum whose stages differ in objects gives every stage the
     largest number, so one network reads them all, and the slots without an object are zeros):
 
     - ``[0:3]`` end-effector position (m), ``[3:6]`` its velocity (m/s), ``[6]`` finger width (m);
-    - per object k (in the order of ``info["objects"]``), from ``7 + 25 k``: position (3), orientation
-      quaternion x y z w (4), linear velocity (3), angular velocity (3), one-hot colour (9, in the order of
+    - per object k (in the order of ``info["objects"]``), from ``7 + 31 k``: position (3), position minus
+      the end-effector position (3), position minus the position at reset (3), orientation quaternion
+      x y z w (4), linear velocity (3), angular velocity (3), one-hot colour (9, in the order of
       ``lanrocli.language.COLOURS``), one-hot shape (3, ``cube cuboid cylinder``).
+
+    The displacement since reset is what makes the reward a function of the observation: reach fails once
+    any object was knocked more than 2.5 cm, and push succeeds once its object slid far enough, both
+    measured from where the objects started. Without it, a knocked object at rest looks like an untouched
+    one, and a random arm knocks one in about a fifth of its reach episodes, after which touching it earns
+    -1 in states the critic cannot tell from those where it earns 0. The relative position is redundant but
+    not idle: what every task needs first is the offset from the hand to the named object.
 
     ``instruction`` is the current goal sentence (instruction, plus the correction from the step it is
     spoken) in the grammar-wide vocabulary, padded with 0. Reward is 0 when the task holds for the goal
@@ -194,6 +203,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         per_object = np.concatenate(
             [
                 states.positions,
+                states.positions - robot.ee_position,
+                states.positions - self._start_positions,
                 states.orientations,
                 states.linear_velocities,
                 states.angular_velocities,

@@ -95,6 +95,22 @@ def test_correction_share_sets_the_style_of_relabelled_sentences() -> None:
             assert (parsed.beginning is not None) == expect_corrections
 
 
+def test_hindsight_share_draws_that_share_from_transitions_relabelling_can_use() -> None:
+    buffer, added = _filled(capacity=20000, episodes=400, seed=8)
+    relabelable = buffer.data["valid"] & (buffer.data["future_count"] > 0)
+    natural = relabelable[: buffer.high].sum() / len(buffer)
+    rng = np.random.default_rng(9)
+    for share in (0.0, 0.5, 1.0):
+        batch = buffer.sample(4096, rng, hindsight_share=share)
+        drawn = relabelable[batch.slots].mean()
+        expected = share + (1.0 - share) * natural
+        assert abs(drawn - expected) < 0.03, (share, drawn, expected)
+        for row in range(0, 4096, 97):  # whole episodes still: every slot still maps to its own episode
+            episode, step = _origin(batch, row, added)
+            assert np.array_equal(batch.obs[row], episode.observations[step])
+    assert natural < 0.9  # the share is what moves the rate, not episodes that all achieve something
+
+
 def test_no_relabelling_at_ratio_zero() -> None:
     buffer, _ = _filled(capacity=3000, episodes=100)
     batch = buffer.sample(512, np.random.default_rng(0), relabel_ratio=0.0)

@@ -54,15 +54,17 @@ def test_spaces_and_layout() -> None:
     env = LanroEnv("lift", objects=3, mode="shape")
     obs, info = env.reset(seed=3)
     assert env.action_space.shape == (4,)
-    assert obs["observation"].dtype == np.float32 and obs["observation"].shape == (observation_size(3),) == (82,)
+    assert obs["observation"].dtype == np.float32 and obs["observation"].shape == (observation_size(3),) == (100,)
     assert obs["instruction"].dtype == np.int64 and obs["instruction"].shape == (grammar_vocabulary().max_length,)
     assert env.observation_space.contains(obs)
     assert set(info) == INFO_KEYS
     o = obs["observation"]
     np.testing.assert_allclose(o[7:10], info["object_positions"][0], atol=1e-6)
-    np.testing.assert_allclose(o[7 + 25 : 10 + 25], info["object_positions"][1], atol=1e-6)
+    np.testing.assert_allclose(o[7 + 31 : 10 + 31], info["object_positions"][1], atol=1e-6)
+    np.testing.assert_allclose(o[10 + 31 : 13 + 31], info["object_positions"][1] - o[:3], atol=1e-6)
+    np.testing.assert_allclose(o[13 + 31 : 16 + 31], 0.0, atol=1e-6)  # nothing has moved at reset
     colour, shape = info["objects"][2]
-    one_hot = o[7 + 50 + 13 : 7 + 75]
+    one_hot = o[7 + 62 + 19 : 7 + 93]
     assert one_hot.sum() == 2 and one_hot[["red", "green", "blue"].index(colour)] == 1
     assert one_hot[9 + ["cube", "cuboid", "cylinder"].index(shape)] == 1
     assert env.max_episode_steps == 50
