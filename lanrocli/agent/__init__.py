@@ -2,7 +2,7 @@
 language relabelling. Knows nothing of configuration files, the terminal or where checkpoints live."""
 
 from lanrocli.agent.buffer import FAILURE_REWARD, SUCCESS_REWARD, Batch, EpisodeData, ReplayBuffer
-from lanrocli.agent.networks import Actor, Critic, LanguageEncoder
+from lanrocli.agent.networks import Actor, Critic, LanguageEncoder, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.relabel import SentencePool, TargetPhrases, sentence_pool, target_phrases
 from lanrocli.agent.sac import SACAgent, SACSettings
@@ -15,6 +15,7 @@ __all__ = [
     "Critic",
     "EpisodeData",
     "LanguageEncoder",
+    "ObjectLayout",
     "ReplayBuffer",
     "RunningNormalizer",
     "SACAgent",

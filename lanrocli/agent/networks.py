@@ -5,11 +5,19 @@ the goal sentence (and, for the critic, the action) before the 256-unit hidden l
 is computed by a :class:`LanguageEncoder` that each network holds as ``encoder``; the networks take the
 summary as an input rather than the tokens, so the agent decides whether actor and critic read the
 sentence through separate encoders (the default) or through the critic's one.
+
+With an :class:`ObjectLayout` the networks read the scene object by object instead (``architecture:
+objects``): one shared layer sees each object's features together with the arm's, the sentence summary and
+(for the critic) the action, and an element-wise max over the objects pools what it found. Whether an
+object is the one the sentence names is then a question about that object alone, asked with the same
+weights for every object, rather than a three-way product of sentence, colour slot and position slot that
+a flat layer must assemble for each slot separately.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
@@ -67,6 +75,35 @@ class LanguageEncoder(nn.Module):
         return summary * (lengths > 0).unsqueeze(1).to(summary.dtype)
 
 
+@dataclass(frozen=True)
+class ObjectLayout:
+    """How a flat observation splits into the arm's features and ``slots`` objects' features of ``object``
+    numbers each (``arm + slots * object`` in all). A slot whose features are all zero holds no object."""
+
+    arm: int
+    object: int
+    slots: int
+
+    @property
+    def size(self) -> int:
+        return self.arm + self.slots * self.object
+
+    def split(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """[B, N] -> the arm's [B, arm] and the objects' [B, slots, object]."""
+        return obs[:, : self.arm], obs[:, self.arm :].reshape(obs.shape[0], self.slots, self.object)
+
+    def present(self, raw_obs: torch.Tensor) -> torch.Tensor:
+        """bool [B, slots]: which slots hold an object, read from the observation before normalisation."""
+        return self.split(raw_obs)[1].ne(0).any(dim=2)
+
+
+def _per_object(layout: ObjectLayout, obs: torch.Tensor, *shared: torch.Tensor) -> torch.Tensor:
+    """[B, slots, object + arm + shared]: each object's features, then the arm's and ``shared``'s."""
+    arm, objects = layout.split(obs)
+    common = torch.cat([arm, *shared], dim=1).unsqueeze(1).expand(-1, layout.slots, -1)
+    return torch.cat([objects, common], dim=2)
+
+
 def _mlp(input_size: int, hidden_size: int, depth: int) -> nn.Sequential:
     layers: list[nn.Module] = []
     for _ in range(depth):
@@ -78,7 +115,9 @@ def _mlp(input_size: int, hidden_size: int, depth: int) -> nn.Sequential:
 class Actor(nn.Module):
     """A Gaussian policy squashed by tanh into the action box [-1, 1].
 
-    ``encoder`` is ``None`` when the actor reads the critic's sentence summary instead of its own.
+    ``encoder`` is ``None`` when the actor reads the critic's sentence summary instead of its own. With a
+    ``layout`` the observation is read object by object (see the module's docstring), and ``present``
+    must be given to every call.
     """
 
     def __init__(
@@ -92,32 +131,51 @@ class Actor(nn.Module):
         depth: int,
         log_std_min: float,
         log_std_max: float,
+        layout: ObjectLayout | None = None,
     ) -> None:
         super().__init__()
         self.encoder = encoder
-        self.obs_layer = nn.Linear(obs_dim, obs_size)
-        self.body = _mlp(obs_size + language_size, hidden_size, depth)
-        body_size = hidden_size if depth > 0 else obs_size + language_size
+        self.layout = layout
+        if layout is None:
+            self.obs_layer = nn.Linear(obs_dim, obs_size)
+            body_input = obs_size + language_size
+        else:
+            self.obs_layer = nn.Linear(layout.object + layout.arm + language_size, hidden_size)
+            body_input = hidden_size
+        self.body = _mlp(body_input, hidden_size, depth)
+        body_size = hidden_size if depth > 0 else body_input
         self.mean = nn.Linear(body_size, action_dim)
         self.log_std = nn.Linear(body_size, action_dim)
         self.log_std_min = log_std_min
         self.log_std_max = log_std_max
 
-    def forward(self, obs: torch.Tensor, language: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(
+        self, obs: torch.Tensor, language: torch.Tensor, present: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """The mean and log standard deviation of the Gaussian before the squashing."""
-        h = self.body(torch.cat([F.relu(self.obs_layer(obs)), language], dim=1))
+        if self.layout is None:
+            features = torch.cat([F.relu(self.obs_layer(obs)), language], dim=1)
+        else:
+            assert present is not None, "an object-wise actor needs to know which slots hold objects"
+            per_object = F.relu(self.obs_layer(_per_object(self.layout, obs, language)))
+            features = (per_object * present.unsqueeze(2).to(per_object.dtype)).amax(dim=1)
+        h = self.body(features)
         log_std = self.log_std(h).clamp(self.log_std_min, self.log_std_max)
         return self.mean(h), log_std
 
     def sample(
-        self, obs: torch.Tensor, language: torch.Tensor, generator: torch.Generator
+        self,
+        obs: torch.Tensor,
+        language: torch.Tensor,
+        generator: torch.Generator,
+        present: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """A reparameterised action in [-1, 1] and its log-probability under the squashed Gaussian.
 
         The noise comes from ``generator`` (never torch's global one) so that the agent's random stream is
         part of its saved state and a resumed run draws the same actions.
         """
-        mean, log_std = self(obs, language)
+        mean, log_std = self(obs, language, present)
         std = log_std.exp()
         noise = torch.randn(mean.shape, generator=generator, device=mean.device, dtype=mean.dtype)
         u = mean + std * noise
@@ -127,9 +185,9 @@ class Actor(nn.Module):
         log_det = (2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))).sum(dim=1)
         return torch.tanh(u), gaussian_log_prob - log_det
 
-    def mode(self, obs: torch.Tensor, language: torch.Tensor) -> torch.Tensor:
+    def mode(self, obs: torch.Tensor, language: torch.Tensor, present: torch.Tensor | None = None) -> torch.Tensor:
         """The deterministic action for evaluation: the squashed mean."""
-        mean, _ = self(obs, language)
+        mean, _ = self(obs, language, present)
         return torch.tanh(mean)
 
 
@@ -156,7 +214,8 @@ class Critic(nn.Module):
     """``n_critics`` Q networks (one, or two for clipped double Q) evaluated together.
 
     Each member has its own observation layer and hidden layers; they read the same sentence summary, from
-    the critic's ``encoder``.
+    the critic's ``encoder``. With a ``layout`` each member reads the observation object by object, and
+    the action joins every object's features (see the module's docstring).
     """
 
     def __init__(
@@ -168,12 +227,19 @@ class Critic(nn.Module):
         hidden_size: int,
         depth: int,
         n_critics: int,
+        layout: ObjectLayout | None = None,
     ) -> None:
         super().__init__()
         self.encoder = encoder
-        self.obs_layer = EnsembleLinear(n_critics, obs_dim, obs_size)
+        self.layout = layout
+        if layout is None:
+            self.obs_layer = EnsembleLinear(n_critics, obs_dim, obs_size)
+            input_size = obs_size + encoder.output_size + action_dim
+        else:
+            object_input = layout.object + layout.arm + encoder.output_size + action_dim
+            self.obs_layer = EnsembleLinear(n_critics, object_input, hidden_size)
+            input_size = hidden_size
         layers: list[nn.Module] = []
-        input_size = obs_size + encoder.output_size + action_dim
         for _ in range(depth):
             layers += [EnsembleLinear(n_critics, input_size, hidden_size), nn.ReLU()]
             input_size = hidden_size
@@ -181,9 +247,18 @@ class Critic(nn.Module):
         self.q = EnsembleLinear(n_critics, input_size, 1)
         self.n_critics = n_critics
 
-    def forward(self, obs: torch.Tensor, language: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, obs: torch.Tensor, language: torch.Tensor, action: torch.Tensor, present: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """Q values of shape [n_critics, B]."""
-        obs_features = F.relu(self.obs_layer(obs))
-        shared = torch.cat([language, action], dim=1).expand(self.n_critics, -1, -1)
-        h = self.body(torch.cat([obs_features, shared], dim=2))
-        return self.q(h).squeeze(2)
+        if self.layout is None:
+            obs_features = F.relu(self.obs_layer(obs))
+            shared = torch.cat([language, action], dim=1).expand(self.n_critics, -1, -1)
+            features = torch.cat([obs_features, shared], dim=2)
+        else:
+            assert present is not None, "an object-wise critic needs to know which slots hold objects"
+            per_object = _per_object(self.layout, obs, language, action)  # [B, slots, in]
+            batch, slots, width = per_object.shape
+            h = F.relu(self.obs_layer(per_object.reshape(batch * slots, width))).reshape(self.n_critics, batch, slots, -1)
+            features = (h * present.unsqueeze(2).to(h.dtype)).amax(dim=2)
+        return self.q(self.body(features)).squeeze(2)

@@ -7,14 +7,14 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 import torch
 from torch import nn
 
 from lanrocli.agent.buffer import Batch, ReplayBuffer
-from lanrocli.agent.networks import Actor, Critic, LanguageEncoder
+from lanrocli.agent.networks import Actor, Critic, LanguageEncoder, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
 
 _FORMAT = 1
@@ -50,8 +50,13 @@ class SACSettings:
     language_size: int = 32
     """GRU hidden size: the length of the sentence summary."""
     obs_size: int = 128
+    """Width of the flat architecture's observation layer (the object-wise one is ``hidden_size`` wide)."""
     hidden_size: int = 256
     hidden_layers: int = 1
+    architecture: Literal["flat", "objects"] = "flat"
+    """``flat``: the observation through one layer, joined with the sentence summary (the paper's baseline);
+    ``objects``: each object's features with the arm's, the summary (and the action) through one shared
+    layer, max-pooled over the objects. Needs the observation's layout (:class:`ObjectLayout`)."""
     share_encoder: bool = False
     """One sentence encoder for actor and critic, trained by the critic's loss only."""
     max_grad_norm: float | None = None
@@ -76,13 +81,15 @@ class SACSettings:
     on average, and the critic never learned that touching earns 0."""
 
     ARCHITECTURE: ClassVar[tuple[str, ...]] = (
-        "critics", "embedding_size", "language_size", "obs_size", "hidden_size", "hidden_layers", "share_encoder",
-        "autotune_alpha",
+        "critics", "embedding_size", "language_size", "obs_size", "hidden_size", "hidden_layers", "architecture",
+        "share_encoder", "autotune_alpha",
     )
     """The settings that shape the networks and the optimiser's state: a saved agent loads only into one
     that agrees on them."""
 
     def __post_init__(self) -> None:
+        if self.architecture not in ("flat", "objects"):
+            raise ValueError(f"architecture must be 'flat' or 'objects', got {self.architecture!r}")
         if self.critics not in (1, 2):
             raise ValueError(f"critics must be 1 or 2, got {self.critics}")
         if self.alpha <= 0.0:
@@ -124,8 +131,14 @@ class SACAgent:
         settings: SACSettings | None = None,
         seed: int = 0,
         device: str | torch.device = "cpu",
+        layout: ObjectLayout | None = None,
     ) -> None:
         self.settings = s = settings if settings is not None else SACSettings()
+        if layout is not None and layout.size != obs_dim:
+            raise ValueError(f"the layout describes {layout.size} observation numbers, not {obs_dim}")
+        if s.architecture == "objects" and layout is None:
+            raise ValueError("architecture 'objects' needs the observation's layout (an ObjectLayout)")
+        self.layout = layout if s.architecture == "objects" else None
         self.obs_dim = obs_dim
         self.action_dim = action_dim
         self.vocab_size = vocab_size
@@ -138,10 +151,10 @@ class SACAgent:
             actor_encoder = None if s.share_encoder else LanguageEncoder(vocab_size, s.embedding_size, s.language_size)
             self.actor = Actor(
                 obs_dim, action_dim, actor_encoder, s.language_size, s.obs_size, s.hidden_size, s.hidden_layers,
-                s.log_std_min, s.log_std_max,
+                s.log_std_min, s.log_std_max, self.layout,
             ).to(self.device)
             self.critic = Critic(
-                obs_dim, action_dim, critic_encoder, s.obs_size, s.hidden_size, s.hidden_layers, s.critics
+                obs_dim, action_dim, critic_encoder, s.obs_size, s.hidden_size, s.hidden_layers, s.critics, self.layout
             ).to(self.device)
         self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
         self.normalizer = RunningNormalizer(obs_dim, s.obs_clip, s.obs_var_eps).to(self.device)
@@ -174,19 +187,24 @@ class SACAgent:
     def _tensor(self, array: np.ndarray, dtype: torch.dtype) -> torch.Tensor:
         return torch.as_tensor(np.asarray(array), device=self.device).to(dtype)
 
+    def _observe(self, observations: np.ndarray) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """Normalised observations [B, N] and, for an object-wise agent, which slots hold objects."""
+        raw = self._tensor(observations, torch.float32).reshape(-1, self.obs_dim)
+        return self.normalizer(raw), None if self.layout is None else self.layout.present(raw)
+
     @torch.no_grad()
     def act(self, obs: Mapping[str, np.ndarray], deterministic: bool = False) -> np.ndarray:
         """Actions in [-1, 1] for a batch ``{"observation": [B, N], "instruction": [B, L]}`` (or one
         unbatched observation, answered with one unbatched action)."""
         observation = np.asarray(obs["observation"])
         single = observation.ndim == 1
-        x = self.normalizer(self._tensor(observation, torch.float32).reshape(-1, self.obs_dim))
+        x, present = self._observe(observation)
         tokens = self._tensor(obs["instruction"], torch.int64).reshape(x.shape[0], -1)
         language = self.actor_encoder(tokens)
         if deterministic:
-            action = self.actor.mode(x, language)
+            action = self.actor.mode(x, language, present)
         else:
-            action, _ = self.actor.sample(x, language, self.generator)
+            action, _ = self.actor.sample(x, language, self.generator, present)
         out = action.cpu().numpy()
         return out[0] if single else out
 
@@ -203,8 +221,8 @@ class SACAgent:
         SAC does; they touch disjoint parameters, so one backward pass gives every network its gradient.
         """
         s = self.settings
-        obs = self.normalizer(self._tensor(batch.obs, torch.float32))
-        next_obs = self.normalizer(self._tensor(batch.next_obs, torch.float32))
+        obs, present = self._observe(batch.obs)
+        next_obs, next_present = self._observe(batch.next_obs)
         tokens = self._tensor(batch.instruction, torch.int64)
         next_tokens = self._tensor(batch.next_instruction, torch.int64)
         action = self._tensor(batch.action, torch.float32)
@@ -222,19 +240,19 @@ class SACAgent:
 
         # Critic: regress on the soft Bellman target of the target critic and the current policy.
         with torch.no_grad():
-            next_action, next_log_prob = self.actor.sample(next_obs, next_actor_language, self.generator)
-            next_q = self.target_critic(next_obs, self.target_critic.encoder(next_tokens), next_action)
+            next_action, next_log_prob = self.actor.sample(next_obs, next_actor_language, self.generator, next_present)
+            next_q = self.target_critic(next_obs, self.target_critic.encoder(next_tokens), next_action, next_present)
             target_q = reward + s.gamma * not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
             if s.clip_target:
                 target_q = target_q.clamp(-1.0 / (1.0 - s.gamma), 0.0)
-        q = self.critic(obs, critic_language, action)
+        q = self.critic(obs, critic_language, action, present)
         critic_loss = (q - target_q).pow(2).mean(dim=1).sum()
 
         # Actor: maximise the critic's value plus entropy. The critic is frozen while it judges the policy's
         # actions, so this loss sends gradient to the actor only.
-        pi_action, log_prob = self.actor.sample(obs, actor_language, self.generator)
+        pi_action, log_prob = self.actor.sample(obs, actor_language, self.generator, present)
         self.critic.requires_grad_(False)
-        q_pi = self.critic(obs, critic_language.detach(), pi_action).min(dim=0).values
+        q_pi = self.critic(obs, critic_language.detach(), pi_action, present).min(dim=0).values
         self.critic.requires_grad_(True)
         actor_loss = (alpha * log_prob - q_pi).mean()
 
@@ -284,6 +302,7 @@ class SACAgent:
             "obs_dim": self.obs_dim,
             "action_dim": self.action_dim,
             "vocab_size": self.vocab_size,
+            "layout": None if self.layout is None else dataclasses.asdict(self.layout),
             "settings": self.settings.to_dict(),
             "actor": self.actor.state_dict(),
             "critic": self.critic.state_dict(),
@@ -304,6 +323,9 @@ class SACAgent:
         if state["format"] != _FORMAT:
             raise ValueError(f"agent state format {state['format']} is not {_FORMAT}")
         saved = SACSettings.from_dict(state["settings"])
+        layout = None if self.layout is None else dataclasses.asdict(self.layout)
+        if state.get("layout") != layout:
+            raise ValueError(f"the saved agent reads observations laid out as {state.get('layout')}, this one {layout}")
         for name in ("obs_dim", "action_dim", "vocab_size"):
             if state[name] != getattr(self, name):
                 raise ValueError(f"the saved agent has {name} {state[name]}, this one {getattr(self, name)}")
@@ -331,6 +353,7 @@ class SACAgent:
         agent = cls(
             state["obs_dim"], state["action_dim"], state["vocab_size"], SACSettings.from_dict(state["settings"]),
             device=device,
+            layout=None if state.get("layout") is None else ObjectLayout(**state["layout"]),
         )
         agent.load_state_dict(state)
         return agent

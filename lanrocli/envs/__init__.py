@@ -2,7 +2,7 @@
 
 from gymnasium.envs.registration import register, registry
 
-from lanrocli.envs.env import LanroEnv, observation_size
+from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
 from lanrocli.envs.instructor import Correction, Instructor, InstructorSettings, Kind
 from lanrocli.envs.scene import Mode, Scene
 
@@ -13,6 +13,7 @@ for _task, _env_id in ENV_IDS.items():
         register(id=_env_id, entry_point="lanrocli.envs.env:LanroEnv", kwargs={"task": _task})
 
 __all__ = [
+    "ARM_SIZE",
     "ENV_IDS",
     "Correction",
     "Instructor",
@@ -20,6 +21,7 @@ __all__ = [
     "Kind",
     "LanroEnv",
     "Mode",
+    "OBJECT_SIZE",
     "Scene",
     "observation_size",
 ]

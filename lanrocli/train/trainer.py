@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from lanrocli.agent import ReplayBuffer, SACAgent, SACSettings
-from lanrocli.envs import LanroEnv, observation_size
+from lanrocli.agent import ObjectLayout, ReplayBuffer, SACAgent, SACSettings
+from lanrocli.envs import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
 from lanrocli.envs.evaluation import EvaluationReport, evaluate
 from lanrocli.envs.tasks import make_task
 from lanrocli.language import grammar_vocabulary
@@ -126,7 +126,10 @@ class Trainer:
         self.vocabulary = grammar_vocabulary()
         obs_dim = observation_size(settings.slots)
         action_dim = 4 if make_task(settings.task).gripper else 3
-        self.agent = SACAgent(obs_dim, action_dim, len(self.vocabulary), agent_settings, settings.seed, self.device)
+        layout = ObjectLayout(ARM_SIZE, OBJECT_SIZE, settings.slots)
+        self.agent = SACAgent(
+            obs_dim, action_dim, len(self.vocabulary), agent_settings, settings.seed, self.device, layout
+        )
         self.buffer = ReplayBuffer(
             agent_settings.buffer_size,
             obs_dim,

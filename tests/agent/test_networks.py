@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, LanguageEncoder
+from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, LanguageEncoder, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.language import grammar_vocabulary, sample_sentence
 
@@ -140,3 +140,64 @@ def test_normalizer_state_round_trips() -> None:
     other.load_state_dict(norm.state_dict())
     x = torch.randn(5, 3)
     assert torch.equal(norm(x), other(x))
+
+
+LAYOUT = ObjectLayout(arm=4, object=5, slots=3)
+
+
+def _scene(rng: np.random.Generator, batch: int, objects: int) -> torch.Tensor:
+    """Raw observations with ``objects`` filled slots, the rest zeros as an environment pads them."""
+    obs = torch.zeros(batch, LAYOUT.size)
+    obs[:, : LAYOUT.arm + objects * LAYOUT.object] = torch.as_tensor(
+        rng.normal(size=(batch, LAYOUT.arm + objects * LAYOUT.object)), dtype=torch.float32
+    )
+    return obs
+
+
+def _swap(obs: torch.Tensor, order: list[int]) -> torch.Tensor:
+    arm, objects = LAYOUT.split(obs)
+    return torch.cat([arm, objects[:, order].reshape(obs.shape[0], -1)], dim=1)
+
+
+def test_object_wise_networks_ignore_the_order_of_objects_and_the_empty_slots() -> None:
+    torch.manual_seed(0)
+    rng = np.random.default_rng(0)
+    encoder = LanguageEncoder(len(VOCAB), 8, 8)
+    actor = Actor(LAYOUT.size, 3, encoder, 8, 16, 32, 1, -20.0, 2.0, LAYOUT)
+    critic = Critic(LAYOUT.size, 3, encoder, 16, 32, 1, 2, LAYOUT)
+    raw = _scene(rng, 6, objects=2)
+    language = torch.randn(6, 8)
+    action = torch.rand(6, 3) * 2 - 1
+    # What normalisation makes of the empty slot is arbitrary: the networks must not read it.
+    normalised = raw + 0.5
+    present = LAYOUT.present(raw)
+    assert present.tolist() == [[True, True, False]] * 6
+    mean, _ = actor(normalised, language, present)
+    q = critic(normalised, language, action, present)
+    for order in ([1, 0, 2], [2, 1, 0], [0, 2, 1]):
+        moved = _swap(normalised, order)
+        moved_present = LAYOUT.present(_swap(raw, order))
+        torch.testing.assert_close(actor(moved, language, moved_present)[0], mean)
+        torch.testing.assert_close(critic(moved, language, action, moved_present), q)
+    filled = normalised.clone()
+    filled[:, -LAYOUT.object :] = 100.0
+    torch.testing.assert_close(critic(filled, language, action, present), q)
+
+
+def test_object_wise_critic_reads_each_object_with_the_sentence_and_the_action() -> None:
+    torch.manual_seed(1)
+    rng = np.random.default_rng(1)
+    encoder = LanguageEncoder(len(VOCAB), 8, 8)
+    critic = Critic(LAYOUT.size, 3, encoder, 16, 32, 1, 1, LAYOUT)
+    raw = _scene(rng, 4, objects=3)
+    present = LAYOUT.present(raw)
+    language, action = torch.randn(4, 8), torch.rand(4, 3)
+    q = critic(raw, language, action, present)
+    other_object = raw.clone()
+    other_object[:, LAYOUT.arm + 1] += 1.0
+    for changed in (
+        critic(other_object, language, action, present),
+        critic(raw, language + 1.0, action, present),
+        critic(raw, language, action - 0.5, present),
+    ):
+        assert not torch.allclose(changed, q)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from lanrocli.agent import Batch, ReplayBuffer, SACAgent, SACSettings
+from lanrocli.agent import Batch, ObjectLayout, ReplayBuffer, SACAgent, SACSettings
 
 from .episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
 
@@ -36,18 +36,22 @@ def _batch(rng: np.random.Generator, size: int = 64) -> Batch:
     )
 
 
+LAYOUT = ObjectLayout(arm=2, object=3, slots=2)  # OBS_DIM numbers, read as an arm and two objects
+
+
 def _agent(seed: int = 0, **settings: object) -> SACAgent:
     small = {"hidden_size": 64, "obs_size": 32, **settings}
-    return SACAgent(OBS_DIM, ACTION_DIM, len(VOCAB), SACSettings(**small), seed=seed)  # type: ignore[arg-type]
+    return SACAgent(OBS_DIM, ACTION_DIM, len(VOCAB), SACSettings(**small), seed=seed, layout=LAYOUT)  # type: ignore[arg-type]
 
 
 def _parameters(agent: SACAgent) -> list[torch.Tensor]:
     return [*agent.actor.parameters(), *agent.critic.parameters(), *agent.target_critic.parameters(), agent.log_alpha]
 
 
-def test_learns_which_way_each_sentence_asks_for() -> None:
+@pytest.mark.parametrize("architecture", ["flat", "objects"])
+def test_learns_which_way_each_sentence_asks_for(architecture: str) -> None:
     rng = np.random.default_rng(0)
-    agent = _agent(batch_size=128)
+    agent = _agent(batch_size=128, architecture=architecture)
     for _ in range(250):
         agent.update(_batch(rng, 128))
     obs = rng.normal(size=(100, OBS_DIM)).astype(np.float32)
@@ -86,9 +90,10 @@ def test_building_and_training_leave_torch_global_generator_alone() -> None:
     assert torch.equal(torch.get_rng_state(), state)
 
 
-def test_state_survives_weights_only_load_and_resumes_bit_identically() -> None:
+@pytest.mark.parametrize("architecture", ["flat", "objects"])
+def test_state_survives_weights_only_load_and_resumes_bit_identically(architecture: str) -> None:
     rng = np.random.default_rng(0)
-    agent = _agent(critics=2)
+    agent = _agent(critics=2, architecture=architecture)
     agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
     for _ in range(3):
         agent.update(_batch(rng))
@@ -110,6 +115,10 @@ def test_loading_needs_the_same_architecture_but_keeps_the_learning_settings() -
     state = _agent().state_dict()
     with pytest.raises(ValueError, match="critics"):
         _agent(critics=2).load_state_dict(state)
+    with pytest.raises(ValueError, match="laid out"):
+        _agent(architecture="objects").load_state_dict(state)
+    with pytest.raises(ValueError, match="needs the observation's layout"):
+        SACAgent(OBS_DIM, ACTION_DIM, len(VOCAB), SACSettings(architecture="objects"))
     slower = _agent(critic_lr=1e-4, gamma=0.9)
     slower.load_state_dict(state)
     assert slower.settings.gamma == 0.9 and slower.optimizer.param_groups[0]["lr"] == 1e-4
