@@ -5,7 +5,7 @@ different colours lie in a 30 x 30 cm area. The instruction names one by colour 
 and touching means coming within ``--radius`` of its centre. Observations have the environment's layout
 (arm 7 numbers, then 31 per object: position, offset from the hand, displacement, orientation,
 velocities, one-hot colour and shape), and the same agent, replay buffer and hindsight relabelling learn
-from them, with one update per step after 1000 random steps.
+from them, with ``updates_per_step`` updates per step after 1000 random steps.
 
 An episode takes microseconds instead of PyBullet's milliseconds, so in minutes it tells whether a change
 to the agent helps it choose the named object at all:
@@ -141,7 +141,7 @@ def main() -> None:
         agent.update_normalizer(data.observations)
         successes.append(success)
         if steps >= RANDOM_STEPS:
-            agent.learn(buffer, learn_rng, len(data))
+            agent.learn(buffer, learn_rng, len(data) * settings.updates_per_step)
         before, steps = steps, steps + len(data)
         if steps // EVAL_EVERY > before // EVAL_EVERY:
             evaluation = np.mean(

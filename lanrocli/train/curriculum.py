@@ -258,6 +258,8 @@ name: reach-basics
 task: reach
 envs: 2
 learning_starts: 256
+agent:
+  architecture: objects
 eval:
   every: 500
   episodes: 5
