@@ -39,9 +39,9 @@ class Stopwatch:
         return timed
 
 
-def run_ours(steps: int, envs: int, learning_starts: int, seed: int) -> dict[str, float]:
+def run_ours(steps: int, envs: int, learning_starts: int, seed: int, architecture: str) -> dict[str, float]:
     settings = TrainSettings(task="reach", env={"objects": 2}, seed=seed, envs=envs, learning_starts=learning_starts)
-    trainer = Trainer(settings, SACSettings(batch_size=256, updates_per_step=1))
+    trainer = Trainer(settings, SACSettings(batch_size=256, updates_per_step=1, architecture=architecture))
     simulation, sampling, updating = Stopwatch(), Stopwatch(), Stopwatch()
     trainer.run(envs)  # start the environments before the clock
     collector = trainer._collector
@@ -97,11 +97,12 @@ def main() -> None:
     parser.add_argument("--learning-starts", type=int, default=500)
     parser.add_argument("--threads", type=int, default=1, help="torch threads (both agents)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--architecture", choices=["flat", "objects"], default="flat", help="of our agent")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 
-    result: dict[str, float] = run_ours(args.steps, args.envs, args.learning_starts, args.seed)
+    result: dict[str, float] = run_ours(args.steps, args.envs, args.learning_starts, args.seed, args.architecture)
     sb3 = run_sb3(args.steps, args.envs, args.learning_starts, args.seed)
     if sb3 is not None:
         result.update(sb3)

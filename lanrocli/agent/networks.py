@@ -140,8 +140,8 @@ class Actor(nn.Module):
             self.obs_layer = nn.Linear(obs_dim, obs_size)
             body_input = obs_size + language_size
         else:
-            self.obs_layer = nn.Linear(layout.object + layout.arm + language_size, hidden_size)
-            body_input = hidden_size
+            self.obs_layer = nn.Linear(layout.object + layout.arm + language_size, obs_size)
+            body_input = obs_size
         self.body = _mlp(body_input, hidden_size, depth)
         body_size = hidden_size if depth > 0 else body_input
         self.mean = nn.Linear(body_size, action_dim)
@@ -237,8 +237,8 @@ class Critic(nn.Module):
             input_size = obs_size + encoder.output_size + action_dim
         else:
             object_input = layout.object + layout.arm + encoder.output_size + action_dim
-            self.obs_layer = EnsembleLinear(n_critics, object_input, hidden_size)
-            input_size = hidden_size
+            self.obs_layer = EnsembleLinear(n_critics, object_input, obs_size)
+            input_size = obs_size
         layers: list[nn.Module] = []
         for _ in range(depth):
             layers += [EnsembleLinear(n_critics, input_size, hidden_size), nn.ReLU()]

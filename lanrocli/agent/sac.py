@@ -50,7 +50,7 @@ class SACSettings:
     language_size: int = 32
     """GRU hidden size: the length of the sentence summary."""
     obs_size: int = 128
-    """Width of the flat architecture's observation layer (the object-wise one is ``hidden_size`` wide)."""
+    """Width of the observation layer: over the whole observation (flat) or over each object (objects)."""
     hidden_size: int = 256
     hidden_layers: int = 1
     architecture: Literal["flat", "objects"] = "flat"
