@@ -76,9 +76,9 @@ class SACSettings:
     hindsight_share: float = 0.5
     """Share of each batch drawn from the transitions that relabelling can turn into successes (their episode
     achieves the task on some object at that step or later); the rest is drawn uniformly. Sparse tasks need
-    it: in reach with 2 objects a random arm touches an object in 8% of its episodes, mostly within a few
-    steps, so 1.5% of the stored transitions could be relabelled at all. Uniform batches held half a success
-    on average, and the critic never learned that touching earns 0."""
+    it: when random arms touched an object in 8% of reach episodes, mostly within a few steps, 1.5% of the
+    stored transitions could be relabelled at all; uniform batches held half a success on average, and the
+    critic valued the touching step itself at -13 instead of 0 after 130k steps."""
 
     ARCHITECTURE: ClassVar[tuple[str, ...]] = (
         "critics", "embedding_size", "language_size", "obs_size", "hidden_size", "hidden_layers", "architecture",
