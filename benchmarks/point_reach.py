@@ -26,10 +26,14 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from pydantic import ValidationError
 
-from lanrocli.agent import EpisodeData, ObjectLayout, ReplayBuffer, SACAgent, SACSettings
+from lanrocli.agent import EpisodeData, ObjectLayout, ReplayBuffer, SACAgent
 from lanrocli.envs import ARM_SIZE, OBJECT_SIZE
 from lanrocli.language import COLOURS, SHAPES, grammar_vocabulary
+from lanrocli.train.curriculum import AgentConfig
+
+from learning import agent_overrides  # this directory's learning benchmark: the same --agent parsing
 
 VOCABULARY = grammar_vocabulary()
 START = np.array([0.0, 0.0, 0.10])
@@ -98,15 +102,6 @@ def episode(
     return data, bool(terminated[-1])
 
 
-def _convert(value: str, default: object) -> object:
-    """``value`` as the type of the setting's default (a number where the default is None)."""
-    if isinstance(default, bool):
-        if value.lower() not in ("true", "false"):
-            raise SystemExit(f"--agent: expected true or false, got {value!r}")
-        return value.lower() == "true"
-    return float(value) if default is None else type(default)(value)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=40000)
@@ -118,14 +113,10 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
 
-    defaults = SACSettings().to_dict()
-    overrides = {}
-    for pair in args.agent:
-        name, _, value = pair.partition("=")
-        if name not in defaults:
-            raise SystemExit(f"--agent: unknown setting {name!r}; known: {', '.join(sorted(defaults))}")
-        overrides[name] = _convert(value, defaults[name])
-    settings = SACSettings(**overrides)
+    try:
+        settings = AgentConfig.model_validate(agent_overrides(args.agent)).settings()
+    except ValidationError as error:
+        raise SystemExit(f"--agent: {error}") from None
     layout = ObjectLayout(ARM_SIZE, OBJECT_SIZE, args.objects)
     agent = SACAgent(layout.size, 3, len(VOCABULARY), settings, seed=args.seed, layout=layout)
     buffer = ReplayBuffer(

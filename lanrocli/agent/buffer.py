@@ -311,10 +311,12 @@ class ReplayBuffer:
         )
 
     def _draw(self, batch_size: int, rng: np.random.Generator, hindsight_share: float) -> np.ndarray:
-        if self._relabelable is None:
+        if hindsight_share == 0.0:
+            return self._draw_valid(batch_size, rng)
+        if self._relabelable is None:  # listed once per added episode, not per batch
             high = self.high
             self._relabelable = np.flatnonzero(self.data["valid"][:high] & (self.data["future_count"][:high] > 0))
-        n_hindsight = rng.binomial(batch_size, hindsight_share) if self._relabelable.size and hindsight_share else 0
+        n_hindsight = rng.binomial(batch_size, hindsight_share) if self._relabelable.size else 0
         hindsight = self._relabelable[rng.integers(0, self._relabelable.size, size=n_hindsight)]
         return np.concatenate([hindsight, self._draw_valid(batch_size - n_hindsight, rng)])
 

@@ -104,6 +104,12 @@ def _per_object(layout: ObjectLayout, obs: torch.Tensor, *shared: torch.Tensor) 
     return torch.cat([objects, common], dim=2)
 
 
+def _pool_objects(features: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
+    """Element-wise max over the slot axis (the one before the last) of non-negative per-object features;
+    an empty slot counts as zeros, so it never wins."""
+    return (features * present.unsqueeze(-1).to(features.dtype)).amax(dim=-2)
+
+
 def _mlp(input_size: int, hidden_size: int, depth: int) -> nn.Sequential:
     layers: list[nn.Module] = []
     for _ in range(depth):
@@ -157,8 +163,7 @@ class Actor(nn.Module):
             features = torch.cat([F.relu(self.obs_layer(obs)), language], dim=1)
         else:
             assert present is not None, "an object-wise actor needs to know which slots hold objects"
-            per_object = F.relu(self.obs_layer(_per_object(self.layout, obs, language)))
-            features = (per_object * present.unsqueeze(2).to(per_object.dtype)).amax(dim=1)
+            features = _pool_objects(F.relu(self.obs_layer(_per_object(self.layout, obs, language))), present)
         h = self.body(features)
         log_std = self.log_std(h).clamp(self.log_std_min, self.log_std_max)
         return self.mean(h), log_std
@@ -260,5 +265,5 @@ class Critic(nn.Module):
             per_object = _per_object(self.layout, obs, language, action)  # [B, slots, in]
             batch, slots, width = per_object.shape
             h = F.relu(self.obs_layer(per_object.reshape(batch * slots, width))).reshape(self.n_critics, batch, slots, -1)
-            features = (h * present.unsqueeze(2).to(h.dtype)).amax(dim=2)
+            features = _pool_objects(h, present)
         return self.q(self.body(features)).squeeze(2)
