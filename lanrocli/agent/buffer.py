@@ -74,6 +74,7 @@ class Batch:
     next_instruction: np.ndarray  # int64 [B, L]
     done: np.ndarray  # bool [B]
     relabelled: np.ndarray  # bool [B]
+    named: np.ndarray  # int64 [B]: the object slot a relabelled sentence singles out, -1 where not relabelled
     slots: np.ndarray  # int64 [B]
 
 
@@ -282,6 +283,7 @@ class ReplayBuffer:
         done = d["terminated"][idx]
 
         relabel = (d["future_count"][idx] > 0) & (rng.random(batch_size) < relabel_ratio)
+        named = np.full(batch_size, -1, dtype=np.int64)
         rows = idx[relabel]
         if rows.size:
             step = d["achieving_slot"][d["future_first"][rows] + rng.integers(0, d["future_count"][rows])]
@@ -297,6 +299,7 @@ class ReplayBuffer:
             next_instruction[relabel] = sentence
             reward[relabel] = np.where(success, SUCCESS_REWARD, FAILURE_REWARD)
             done[relabel] = success
+            named[relabel] = target
 
         return Batch(
             obs=d["obs"][idx],
@@ -307,6 +310,7 @@ class ReplayBuffer:
             next_instruction=next_instruction,
             done=done,
             relabelled=relabel,
+            named=named,
             slots=idx,
         )
 

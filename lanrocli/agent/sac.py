@@ -11,6 +11,7 @@ from typing import Any, ClassVar, Literal
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from lanrocli.agent.buffer import Batch, ReplayBuffer
@@ -50,13 +51,19 @@ class SACSettings:
     language_size: int = 32
     """GRU hidden size: the length of the sentence summary."""
     obs_size: int = 128
-    """Width of the observation layer: over the whole observation (flat) or over each object (objects)."""
+    """Width of the observation layer, and of the attention's keys and queries (objects)."""
     hidden_size: int = 256
     hidden_layers: int = 1
     architecture: Literal["flat", "objects"] = "flat"
     """``flat``: the observation through one layer, joined with the sentence summary (the paper's baseline);
-    ``objects``: each object's features with the arm's, the summary (and the action) through one shared
-    layer, max-pooled over the objects. Needs the observation's layout (:class:`ObjectLayout`)."""
+    ``objects``: attention of the sentence summary over the objects picks the named one, and the observation
+    layer reads the arm's features and that object's. Needs the observation's layout (:class:`ObjectLayout`)."""
+    grounding: float = 1.0
+    """Weight of an auxiliary loss for ``architecture: objects``: the cross-entropy between each reader's
+    attention over the objects and the object a relabelled sentence singles out (which the buffer knows,
+    since it chose the sentence for that object). It teaches actor and critic which object a sentence
+    names directly, rather than only through the small differences it makes to Bellman targets. 0 turns
+    it off."""
     share_encoder: bool = False
     """One sentence encoder for actor and critic, trained by the critic's loss only."""
     max_grad_norm: float | None = None
@@ -96,6 +103,8 @@ class SACSettings:
             raise ValueError(f"alpha must be positive, got {self.alpha}")
         if not 0.0 <= self.polyak <= 1.0 or not 0.0 <= self.gamma <= 1.0:
             raise ValueError("gamma and polyak must lie in [0, 1]")
+        if self.grounding < 0.0:
+            raise ValueError(f"grounding must not be negative, got {self.grounding}")
         for name in ("relabel_ratio", "correction_share", "hindsight_share"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
@@ -256,12 +265,14 @@ class SACAgent:
         self.critic.requires_grad_(True)
         actor_loss = (alpha * log_prob - q_pi).mean()
 
+        grounding_loss = self._grounding_loss(batch, obs, present, critic_language, actor_language)
+
         # Temperature: raise alpha when the policy's entropy falls below the target, lower it above. (Without
         # tuning, log_alpha has no gradient and this loss is only reported.)
         alpha_loss = -(self.log_alpha * (log_prob.detach() + self.target_entropy)).mean()
 
         self.optimizer.zero_grad(set_to_none=True)
-        (critic_loss + actor_loss + alpha_loss).backward()
+        (critic_loss + actor_loss + alpha_loss + s.grounding * grounding_loss).backward()
         if s.max_grad_norm is not None:
             nn.utils.clip_grad_norm_(self.critic.parameters(), s.max_grad_norm)
             nn.utils.clip_grad_norm_(self.actor.parameters(), s.max_grad_norm)
@@ -271,11 +282,32 @@ class SACAgent:
         self.updates += 1
 
         with torch.no_grad():
-            metrics = torch.stack(
-                [critic_loss, actor_loss, alpha_loss, alpha, q.mean(), target_q.mean(), -log_prob.mean()]
-            ).tolist()
-        names = ("critic_loss", "actor_loss", "alpha_loss", "alpha", "q_mean", "target_q_mean", "entropy")
+            losses = [critic_loss, actor_loss, alpha_loss, grounding_loss]
+            metrics = torch.stack([*losses, alpha, q.mean(), target_q.mean(), -log_prob.mean()]).tolist()
+        names = (
+            "critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy"
+        )
         return dict(zip(names, metrics))
+
+    def _grounding_loss(
+        self,
+        batch: Batch,
+        obs: torch.Tensor,
+        present: torch.Tensor | None,
+        critic_language: torch.Tensor,
+        actor_language: torch.Tensor,
+    ) -> torch.Tensor:
+        """Cross-entropy of the actor's and each critic's attention against the object that a relabelled
+        sentence names; zero without object-wise readers, a weight of 0 or relabelled transitions."""
+        rows = torch.as_tensor(np.flatnonzero(batch.named >= 0), device=self.device)
+        if present is None or self.settings.grounding == 0.0 or rows.numel() == 0:
+            return torch.zeros((), device=self.device)
+        named = self._tensor(batch.named, torch.int64)[rows]
+        loss = torch.zeros((), device=self.device)
+        for network, language in ((self.critic, critic_language), (self.actor, actor_language)):
+            scores = network.reader.scores(obs[rows], language[rows], present[rows])  # [members, rows, slots]
+            loss = loss + F.cross_entropy(scores.flatten(0, 1), named.repeat(scores.shape[0]))
+        return loss
 
     def learn(self, buffer: ReplayBuffer, rng: np.random.Generator, n_updates: int) -> dict[str, float]:
         """``n_updates`` updates on batches sampled (and relabelled per the settings) from ``buffer``;

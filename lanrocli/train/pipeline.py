@@ -44,7 +44,9 @@ REPORT = "report.md"
 BEST = "best"
 LAST = "last"
 
-AGENT_METRICS = ("critic_loss", "actor_loss", "alpha_loss", "alpha", "q_mean", "target_q_mean", "entropy")
+AGENT_METRICS = (
+    "critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy"
+)
 METRIC_COLUMNS = (
     "stage", "stage_name", "env_steps", "stage_steps", "wall_time", "success", "correction_success",
     *(f"success_{kind.value}" for kind in Kind), "mean_return", "mean_length", "train_success", "rule_holds",

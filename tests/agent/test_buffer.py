@@ -73,11 +73,13 @@ def test_relabelled_sentences_name_a_future_achievement_and_rewards_follow_eq_1(
                 assert np.array_equal(batch.instruction[row], episode.instructions[step])
                 assert np.array_equal(batch.next_instruction[row], episode.next_instructions[step])
                 assert batch.reward[row] == episode.rewards[step] and batch.done[row] == episode.terminated[step]
+                assert batch.named[row] == -1
                 continue
             relabelled += 1
             assert np.array_equal(batch.instruction[row], batch.next_instruction[row])
             (k,) = referents(parse(VOCAB.decode(batch.instruction[row]), episode.task), objects)
             assert future[:, k].any(), "the named object is achieved at this step or later"
+            assert batch.named[row] == k
             achieved_now = bool(episode.achieved[step, k])
             assert batch.reward[row] == (0.0 if achieved_now else -1.0)
             assert batch.done[row] == achieved_now
@@ -149,7 +151,7 @@ def test_save_and_load_round_trip_exactly_after_wrapping(tmp_path: Path) -> None
     loaded.add_episode(episode)
     a = buffer.sample(128, np.random.default_rng(1), relabel_ratio=0.8, correction_share=0.5)
     b = loaded.sample(128, np.random.default_rng(1), relabel_ratio=0.8, correction_share=0.5)
-    for field in ("obs", "instruction", "next_instruction", "reward", "done", "relabelled", "slots"):
+    for field in ("obs", "instruction", "next_instruction", "reward", "done", "relabelled", "named", "slots"):
         assert np.array_equal(getattr(a, field), getattr(b, field)), field
 
 

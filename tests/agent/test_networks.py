@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, LanguageEncoder, ObjectLayout
+from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, LanguageEncoder, ObjectLayout, SceneReader
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.language import grammar_vocabulary, sample_sentence
 
@@ -184,7 +184,7 @@ def test_object_wise_networks_ignore_the_order_of_objects_and_the_empty_slots() 
     torch.testing.assert_close(critic(filled, language, action, present), q)
 
 
-def test_object_wise_critic_reads_each_object_with_the_sentence_and_the_action() -> None:
+def test_object_wise_critic_reads_the_objects_the_sentence_and_the_action() -> None:
     torch.manual_seed(1)
     rng = np.random.default_rng(1)
     encoder = LanguageEncoder(len(VOCAB), 8, 8)
@@ -201,3 +201,21 @@ def test_object_wise_critic_reads_each_object_with_the_sentence_and_the_action()
         critic(raw, language, action - 0.5, present),
     ):
         assert not torch.allclose(changed, q)
+
+
+def test_scene_reader_returns_the_arm_and_the_object_its_attention_picks() -> None:
+    rng = np.random.default_rng(2)
+    reader = SceneReader(1, LAYOUT, language_size=8, width=4)
+    with torch.no_grad():  # every key is 1000 x the object's first feature, and every query is 1s
+        reader.key.weight.zero_()
+        reader.key.weight[0, 0, :] = 1000.0
+        reader.key.bias.zero_()
+        reader.query.weight.zero_()
+        reader.query.bias.fill_(1.0)
+    raw = _scene(rng, 8, objects=2)  # the third slot empty: its zero feature must never win
+    raw[:, LAYOUT.arm :: LAYOUT.object][:, :2] -= 5.0
+    present = LAYOUT.present(raw)
+    arm, objects = LAYOUT.split(raw)
+    out = reader(raw, torch.randn(8, 8), present)[0]
+    picked = objects[torch.arange(8), objects[:, :2, 0].argmax(dim=1)]
+    torch.testing.assert_close(out, torch.cat([arm, picked], dim=1))
