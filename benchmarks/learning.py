@@ -24,6 +24,10 @@ from lanrocli.train import pick_device
 from lanrocli.train.curriculum import Curriculum
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
 
+AGENT = {"architecture": "objects"}
+"""The agent as the shipped curricula configure it; ``--agent`` changes any setting (``architecture=flat``
+for the paper's network)."""
+
 SETTINGS = {
     "plain": {"objects": 2, "mode": "color", "correction_rate": 0.0},
     "corrections": {"objects": 2, "mode": "color", "correction_rate": 0.5},
@@ -80,14 +84,14 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
     parser.add_argument(
-        "--agent", nargs="*", default=[], metavar="NAME=VALUE", help="agent settings, e.g. critics=2 (default: the paper's)"
+        "--agent", nargs="*", default=[], metavar="NAME=VALUE", help="agent settings, e.g. critics=2 (default: the paper's, read object by object)"
     )
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     device = pick_device(args.device)
     plan = curriculum(
         args.setting, args.steps, args.seed, args.envs, args.eval_every, args.eval_episodes, args.target,
-        agent_overrides(args.agent),
+        {**AGENT, **agent_overrides(args.agent)},
     )
     if args.resume:
         run = CurriculumRun.resume(args.out, plan, device, Printer())

@@ -33,7 +33,7 @@ from lanrocli.envs import ARM_SIZE, OBJECT_SIZE
 from lanrocli.language import COLOURS, SHAPES, grammar_vocabulary
 from lanrocli.train.curriculum import AgentConfig
 
-from learning import agent_overrides  # this directory's learning benchmark: the same --agent parsing
+from learning import AGENT, agent_overrides  # this directory's learning benchmark: same agent, same --agent parsing
 
 VOCABULARY = grammar_vocabulary()
 START = np.array([0.0, 0.0, 0.10])
@@ -114,7 +114,7 @@ def main() -> None:
     torch.set_num_threads(1)
 
     try:
-        settings = AgentConfig.model_validate(agent_overrides(args.agent)).settings()
+        settings = AgentConfig.model_validate({**AGENT, **agent_overrides(args.agent)}).settings()
     except ValidationError as error:
         raise SystemExit(f"--agent: {error}") from None
     layout = ObjectLayout(ARM_SIZE, OBJECT_SIZE, args.objects)
