@@ -84,7 +84,8 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
     parser.add_argument(
-        "--agent", nargs="*", default=[], metavar="NAME=VALUE", help="agent settings, e.g. critics=2 (default: the paper's, read object by object)"
+        "--agent", nargs="*", default=[], metavar="NAME=VALUE",
+        help="agent settings, e.g. critics=2 (default: the paper's, read object by object)",
     )
     args = parser.parse_args()
     torch.set_num_threads(args.threads)

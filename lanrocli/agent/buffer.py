@@ -63,8 +63,9 @@ class EpisodeData:
 
 @dataclass
 class Batch:
-    """Sampled transitions, relabelled where ``relabelled`` is true. ``done``: the step ended by success.
-    ``slots``: where in the buffer each transition is stored, to look up what the batch does not carry."""
+    """Sampled transitions. ``done``: the step ended by success. ``named``: for a relabelled transition the
+    object slot its new sentence singles out, -1 for the others. ``slots``: where in the buffer each
+    transition is stored, to look up what the batch does not carry."""
 
     obs: np.ndarray  # float32 [B, N]
     instruction: np.ndarray  # int64 [B, L]
@@ -73,9 +74,13 @@ class Batch:
     next_obs: np.ndarray  # float32 [B, N]
     next_instruction: np.ndarray  # int64 [B, L]
     done: np.ndarray  # bool [B]
-    relabelled: np.ndarray  # bool [B]
-    named: np.ndarray  # int64 [B]: the object slot a relabelled sentence singles out, -1 where not relabelled
+    named: np.ndarray  # int64 [B]
     slots: np.ndarray  # int64 [B]
+
+    @property
+    def relabelled(self) -> np.ndarray:
+        """bool [B]: which transitions got a hindsight sentence."""
+        return self.named >= 0
 
 
 # The stored arrays: name -> (dtype, shape after the slot axis, in terms of the buffer's dimensions).
@@ -309,7 +314,6 @@ class ReplayBuffer:
             next_obs=d["next_obs"][idx],
             next_instruction=next_instruction,
             done=done,
-            relabelled=relabel,
             named=named,
             slots=idx,
         )

@@ -274,9 +274,20 @@ class Critic(nn.Module):
         self, obs: torch.Tensor, language: torch.Tensor, action: torch.Tensor, present: torch.Tensor | None = None
     ) -> torch.Tensor:
         """Q values of shape [n_critics, B]."""
+        return self.value(self.observe(obs, language, present), language, action)
+
+    def observe(self, obs: torch.Tensor, language: torch.Tensor, present: torch.Tensor | None = None) -> torch.Tensor:
+        """What each member makes of the observation before it sees the action, [n_critics, B, obs_size].
+
+        Split from :meth:`value` so that an update that judges two actions in the same states (the stored
+        one and the policy's) reads the states once.
+        """
         if self.reader is not None:
             assert present is not None, "an object-wise critic needs to know which slots hold objects"
             obs = self.reader(obs, language, present)
-        obs_features = F.relu(self.obs_layer(obs))
+        return F.relu(self.obs_layer(obs))
+
+    def value(self, observed: torch.Tensor, language: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """Q values [n_critics, B] of ``action`` in states that :meth:`observe` read as ``observed``."""
         shared = torch.cat([language, action], dim=1).expand(self.n_critics, -1, -1)
-        return self.q(self.body(torch.cat([obs_features, shared], dim=2))).squeeze(2)
+        return self.q(self.body(torch.cat([observed, shared], dim=2))).squeeze(2)

@@ -254,14 +254,15 @@ class SACAgent:
             target_q = reward + s.gamma * not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
             if s.clip_target:
                 target_q = target_q.clamp(-1.0 / (1.0 - s.gamma), 0.0)
-        q = self.critic(obs, critic_language, action, present)
+        observed = self.critic.observe(obs, critic_language, present)
+        q = self.critic.value(observed, critic_language, action)
         critic_loss = (q - target_q).pow(2).mean(dim=1).sum()
 
-        # Actor: maximise the critic's value plus entropy. The critic is frozen while it judges the policy's
-        # actions, so this loss sends gradient to the actor only.
+        # Actor: maximise the critic's value plus entropy. The critic judges the policy's actions in the states
+        # it has just read (detached) and is frozen meanwhile, so this loss sends gradient to the actor only.
         pi_action, log_prob = self.actor.sample(obs, actor_language, self.generator, present)
         self.critic.requires_grad_(False)
-        q_pi = self.critic(obs, critic_language.detach(), pi_action, present).min(dim=0).values
+        q_pi = self.critic.value(observed.detach(), critic_language.detach(), pi_action).min(dim=0).values
         self.critic.requires_grad_(True)
         actor_loss = (alpha * log_prob - q_pi).mean()
 

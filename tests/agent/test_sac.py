@@ -31,7 +31,6 @@ def _batch(rng: np.random.Generator, size: int = 64) -> Batch:
         next_obs=rng.normal(size=(size, OBS_DIM)).astype(np.float32),
         next_instruction=instruction.copy(),
         done=np.ones(size, dtype=bool),
-        relabelled=np.zeros(size, dtype=bool),
         named=np.full(size, -1),
         slots=np.arange(size),
     )
@@ -70,7 +69,6 @@ def _grounding_batch(rng: np.random.Generator, size: int = 128) -> Batch:
     objects[:, 0, 0] = np.where(red_first, 1.0, -1.0)
     objects[:, 1, 0] = -objects[:, 0, 0]
     asks_red = (batch.instruction == RED).all(axis=1)
-    batch.relabelled[:] = True
     batch.named[:] = np.where(asks_red == red_first, 0, 1)
     return batch
 
