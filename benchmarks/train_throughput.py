@@ -4,16 +4,19 @@ spent waiting for the simulation, sampling (and relabelling) batches, and updati
 Settings: reach with 2 objects, 2 environments (subprocesses), one update per environment step, batch 256,
 updates starting after ``--learning-starts`` steps. If stable-baselines3 is installed, its SAC
 (``MultiInputPolicy``, same batch, same update ratio, same environment, same steps) runs in the same session
-and the ratio is printed.
+and the ratio is printed. With ``--rounds N`` the two alternate N times and the medians are reported, which
+evens out a shared machine's drift better than one long run each.
 
-    python benchmarks/train_throughput.py --steps 4000
+    python benchmarks/train_throughput.py --steps 2000 --rounds 3
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import time
+from typing import Any
 
 import torch
 
@@ -98,27 +101,38 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1, help="torch threads (both agents)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--architecture", choices=["flat", "objects"], default="flat", help="of our agent")
+    parser.add_argument("--rounds", type=int, default=1, help="alternate ours and stable-baselines3 this many times")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    if args.rounds < 1:
+        parser.error("--rounds must be at least 1")
     torch.set_num_threads(args.threads)
 
-    result: dict[str, float] = run_ours(args.steps, args.envs, args.learning_starts, args.seed, args.architecture)
-    sb3 = run_sb3(args.steps, args.envs, args.learning_starts, args.seed)
-    if sb3 is not None:
-        result.update(sb3)
-        result["ratio"] = result["env_steps_per_s"] / sb3["sb3_env_steps_per_s"]
+    rounds = []
+    for _ in range(args.rounds):
+        result = run_ours(args.steps, args.envs, args.learning_starts, args.seed, args.architecture)
+        sb3 = run_sb3(args.steps, args.envs, args.learning_starts, args.seed)
+        if sb3 is not None:
+            result.update(sb3, ratio=result["env_steps_per_s"] / sb3["sb3_env_steps_per_s"])
+        rounds.append(result)
+    median: dict[str, Any] = {key: statistics.median(r[key] for r in rounds) for key in rounds[0]}
+    if "ratio" in median:
+        median["ratios"] = [r["ratio"] for r in rounds]
     if args.json:
-        print(json.dumps(result))
+        print(json.dumps(median))
         return
-    print(f"lanro: {result['env_steps_per_s']:.0f} env steps/s, {result['updates_per_s']:.0f} updates/s")
+    print(f"lanro: {median['env_steps_per_s']:.0f} env steps/s, {median['updates_per_s']:.0f} updates/s")
     print(
-        f"  of {result['seconds']:.1f} s: waiting for simulation {result['simulation_wait_s']:.1f} s, "
-        f"sampling {result['sampling_s']:.1f} s, updates {result['update_s']:.1f} s"
+        f"  of {median['seconds']:.1f} s: waiting for simulation {median['simulation_wait_s']:.1f} s, "
+        f"sampling {median['sampling_s']:.1f} s, updates {median['update_s']:.1f} s"
     )
-    if sb3 is not None:
-        print(f"stable-baselines3 SAC: {sb3['sb3_env_steps_per_s']:.0f} env steps/s, {sb3['sb3_updates_per_s']:.0f} updates/s")
-        print(f"ratio: {result['ratio']:.2f}x")
-
+    if "ratio" in median:
+        print(
+            f"stable-baselines3 SAC: {median['sb3_env_steps_per_s']:.0f} env steps/s, "
+            f"{median['sb3_updates_per_s']:.0f} updates/s"
+        )
+        each = ", ".join(f"{r:.2f}x" for r in median["ratios"])
+        print(f"ratio: {median['ratio']:.2f}x" + (f" (median of rounds {each})" if args.rounds > 1 else ""))
 
 if __name__ == "__main__":
     main()

@@ -16,26 +16,27 @@ must assemble for each slot separately.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
+from lanrocli.agent.gru import read_sentences
 from lanrocli.language import PAD_ID
 
 
 class LanguageEncoder(nn.Module):
     """Word embedding and a GRU; the GRU's state after the sentence's last true word summarises the sentence.
 
-    The GRU runs over the padded array (one fused call for the batch) and the summary is read at position
-    ``length - 1``. A unidirectional GRU's state there depends only on the words up to it, so the padding
-    that follows is never read as words and the summary does not depend on the padded length L. Padding is
-    assumed to follow the words, as :meth:`Vocabulary.encode` puts it.
+    A unidirectional GRU's state there depends only on the words up to it, so the padding that follows is
+    never read as words and the summary does not depend on the padded length. Padding is assumed to follow
+    the words, as :meth:`Vocabulary.encode` puts it.
 
-    Two savings keep the GRU, the costliest part of an update on CPU, cheap: each distinct sentence of a
-    batch is encoded once (a batch repeats sentences, and an update encodes a transition's sentence and
-    its next sentence, nearly always the same), and the GRU stops after the batch's longest sentence.
+    The ``nn.GRU`` module holds the weights (and draws them as PyTorch does); :func:`encode` runs the
+    equations itself, so that the encoders of several networks read a batch together (see
+    :mod:`lanrocli.agent.gru`).
     """
 
     def __init__(self, vocab_size: int, embedding_size: int, hidden_size: int) -> None:
@@ -47,31 +48,44 @@ class LanguageEncoder(nn.Module):
 
     def forward(self, tokens: torch.Tensor) -> torch.Tensor:
         """``tokens``: int64 [B, L] ids padded with 0. Returns float [B, hidden]."""
-        sentences, inverse = self._distinct(tokens)
-        return self._summarise(sentences)[inverse]
+        return encode([self], tokens)[0]
 
-    def _distinct(self, tokens: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """The distinct rows of ``tokens`` and, per row, the index of its distinct row."""
-        length = tokens.shape[1]
-        if self.vocab_size**length >= 2**63:
-            sentences, inverse = torch.unique(tokens, dim=0, return_inverse=True)
-            return sentences, inverse
-        # A sentence read as a number in base vocab_size: distinct numbers are far cheaper to find than
-        # distinct rows. Any row with a given number stands for all of them, as they hold the same words.
-        powers = self.vocab_size ** torch.arange(length, device=tokens.device, dtype=torch.int64)
-        numbers, inverse = torch.unique((tokens * powers).sum(dim=1), return_inverse=True)
-        rows = torch.arange(tokens.shape[0], device=tokens.device)
-        first = torch.empty_like(numbers).scatter_(0, inverse, rows)
-        return tokens[first], inverse
 
-    def _summarise(self, tokens: torch.Tensor) -> torch.Tensor:
-        lengths = (tokens != PAD_ID).sum(dim=1)
-        steps = max(int(lengths.max()), 1)
-        states, _ = self.gru(self.embedding(tokens[:, :steps]))
-        last = (lengths - 1).clamp(min=0)
-        summary = states[torch.arange(tokens.shape[0], device=tokens.device), last]
-        # An empty sentence has read no word: its summary is the GRU's initial state, zero.
-        return summary * (lengths > 0).unsqueeze(1).to(summary.dtype)
+def encode(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> torch.Tensor:
+    """Each encoder's summaries of the sentences ``tokens`` (int64 [B, L]): float [encoders, B, hidden].
+
+    Two savings keep the encoders, the costliest part of an update on CPU, cheap: each distinct sentence of
+    the batch is read once (a batch repeats sentences, and an update reads a transition's sentence and its
+    next one, nearly always the same), and the GRUs stop after the batch's longest sentence.
+    """
+    sentences, inverse = _distinct(tokens, encoders[0].vocab_size)
+    return _summarise(encoders, sentences).index_select(1, inverse)
+
+
+def _distinct(tokens: torch.Tensor, vocab_size: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The distinct rows of ``tokens`` and, per row, the index of its distinct row."""
+    length = tokens.shape[1]
+    if vocab_size**length >= 2**63:
+        sentences, inverse = torch.unique(tokens, dim=0, return_inverse=True)
+        return sentences, inverse
+    # A sentence read as a number in base vocab_size: distinct numbers are far cheaper to find than
+    # distinct rows. Any row with a given number stands for all of them, as they hold the same words.
+    powers = vocab_size ** torch.arange(length, device=tokens.device, dtype=torch.int64)
+    numbers, inverse = torch.unique((tokens * powers).sum(dim=1), return_inverse=True)
+    rows = torch.arange(tokens.shape[0], device=tokens.device)
+    first = torch.empty_like(numbers).scatter_(0, inverse, rows)
+    return tokens[first], inverse
+
+
+def _summarise(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> torch.Tensor:
+    """Every row of ``tokens`` read by every encoder, [encoders, B, hidden]; an empty row reads as zeros."""
+    grus = [encoder.gru for encoder in encoders]
+    tables = torch.stack(
+        [torch.addmm(gru.bias_ih_l0, encoder.embedding.weight, gru.weight_ih_l0.t()) for encoder, gru in zip(encoders, grus)]
+    )
+    weight_hh = torch.stack([gru.weight_hh_l0 for gru in grus])
+    bias_hh = torch.stack([gru.bias_hh_l0 for gru in grus])
+    return read_sentences(tables, weight_hh, bias_hh, tokens, PAD_ID)
 
 
 @dataclass(frozen=True)

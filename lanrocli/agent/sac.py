@@ -15,7 +15,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from lanrocli.agent.buffer import Batch, ReplayBuffer
-from lanrocli.agent.networks import Actor, Critic, LanguageEncoder, ObjectLayout
+from lanrocli.agent.networks import Actor, Critic, LanguageEncoder, ObjectLayout, encode
 from lanrocli.agent.normalizer import RunningNormalizer
 
 _FORMAT = 1
@@ -239,18 +239,21 @@ class SACAgent:
         not_done = 1.0 - self._tensor(batch.done, torch.float32)
         alpha = self.log_alpha.detach().exp()
 
-        # One encoder pass per network over this and the next sentences (they nearly always coincide). A
-        # shared encoder learns from the critic's loss alone: the actor reads its summary detached.
-        sentences = torch.cat([tokens, next_tokens])
-        critic_summary = self.critic.encoder(sentences)
-        actor_summary = critic_summary.detach() if self.actor.encoder is None else self.actor.encoder(sentences)
-        critic_language = critic_summary[: tokens.shape[0]]
-        actor_language, next_actor_language = actor_summary.chunk(2)
+        # The critic's, the target critic's and the actor's encoders read this and the next sentences (they
+        # nearly always coincide) in one pass. A shared encoder learns from the critic's loss alone: the actor
+        # reads its summary detached.
+        encoders = [self.critic.encoder, self.target_critic.encoder]
+        if self.actor.encoder is not None:
+            encoders.append(self.actor.encoder)
+        summaries = encode(encoders, torch.cat([tokens, next_tokens]))
+        critic_language = summaries[0, : tokens.shape[0]]
+        next_target_language = summaries[1, tokens.shape[0] :].detach()
+        actor_language, next_actor_language = (summaries[2] if len(encoders) == 3 else summaries[0].detach()).chunk(2)
 
         # Critic: regress on the soft Bellman target of the target critic and the current policy.
         with torch.no_grad():
             next_action, next_log_prob = self.actor.sample(next_obs, next_actor_language, self.generator, next_present)
-            next_q = self.target_critic(next_obs, self.target_critic.encoder(next_tokens), next_action, next_present)
+            next_q = self.target_critic(next_obs, next_target_language, next_action, next_present)
             target_q = reward + s.gamma * not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
             if s.clip_target:
                 target_q = target_q.clamp(-1.0 / (1.0 - s.gamma), 0.0)

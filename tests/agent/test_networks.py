@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, LanguageEncoder, ObjectLayout, SceneReader
+from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, LanguageEncoder, ObjectLayout, SceneReader, _summarise
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.language import grammar_vocabulary, sample_sentence
 
@@ -50,7 +50,7 @@ def test_repeated_sentences_give_the_gradients_of_encoding_every_row() -> None:
     weights = torch.randn(tokens.shape[0], 32)
     shared, reference = _encoder(), _encoder()
     (shared(tokens) * weights).sum().backward()
-    (reference._summarise(tokens) * weights).sum().backward()
+    (_summarise([reference], tokens)[0] * weights).sum().backward()
     for a, b in zip(shared.parameters(), reference.parameters()):
         torch.testing.assert_close(a.grad, b.grad)
 
