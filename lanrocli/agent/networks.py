@@ -54,9 +54,9 @@ class LanguageEncoder(nn.Module):
 def encode(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> torch.Tensor:
     """Each encoder's summaries of the sentences ``tokens`` (int64 [B, L]): float [encoders, B, hidden].
 
-    Two savings keep the encoders, the costliest part of an update on CPU, cheap: each distinct sentence of
-    the batch is read once (a batch repeats sentences, and an update reads a transition's sentence and its
-    next one, nearly always the same), and the GRUs stop after the batch's longest sentence.
+    Each distinct sentence of the batch is read once: a batch repeats sentences, and an update reads a
+    transition's sentence and its next one, nearly always the same. Encoders whose parameters need no
+    gradient (a target network's) should come last: the backward pass then leaves them out.
     """
     sentences, inverse = _distinct(tokens, encoders[0].vocab_size)
     return _summarise(encoders, sentences).index_select(1, inverse)
@@ -85,7 +85,9 @@ def _summarise(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> tor
     )
     weight_hh = torch.stack([gru.weight_hh_l0 for gru in grus])
     bias_hh = torch.stack([gru.bias_hh_l0 for gru in grus])
-    return read_sentences(tables, weight_hh, bias_hh, tokens, PAD_ID)
+    learning = [any(p.requires_grad for p in encoder.parameters()) for encoder in encoders]
+    trained = sum(learning) if learning == sorted(learning, reverse=True) else None  # learning ones first
+    return read_sentences(tables, weight_hh, bias_hh, tokens, PAD_ID, trained)
 
 
 @dataclass(frozen=True)
@@ -283,25 +285,40 @@ class Critic(nn.Module):
         self.body = nn.Sequential(*layers)
         self.q = EnsembleLinear(n_critics, input_size, 1)
         self.n_critics = n_critics
+        self.action_dim = action_dim
 
     def forward(
         self, obs: torch.Tensor, language: torch.Tensor, action: torch.Tensor, present: torch.Tensor | None = None
     ) -> torch.Tensor:
         """Q values of shape [n_critics, B]."""
-        return self.value(self.observe(obs, language, present), language, action)
+        return self.value(self.observe(obs, language, present), action)
 
     def observe(self, obs: torch.Tensor, language: torch.Tensor, present: torch.Tensor | None = None) -> torch.Tensor:
-        """What each member makes of the observation before it sees the action, [n_critics, B, obs_size].
+        """Everything each member computes before it sees the action: the first layer after the observation
+        layer, applied to the observation's features and the sentence summary (its action columns left out).
 
         Split from :meth:`value` so that an update that judges two actions in the same states (the stored
-        one and the policy's) reads the states once.
+        one and the policy's) reads the states once: the policy's action then costs a product with the
+        action's few columns instead of the whole layer, forward and backward.
         """
         if self.reader is not None:
             assert present is not None, "an object-wise critic needs to know which slots hold objects"
             obs = self.reader(obs, language, present)
-        return F.relu(self.obs_layer(obs))
+        observed = F.relu(self.obs_layer(obs))
+        first = self._first_layer()
+        state = torch.cat([observed, language.expand(self.n_critics, -1, -1)], dim=2)
+        return torch.baddbmm(first.bias, state, first.weight[:, : -self.action_dim])
 
-    def value(self, observed: torch.Tensor, language: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        """Q values [n_critics, B] of ``action`` in states that :meth:`observe` read as ``observed``."""
-        shared = torch.cat([language, action], dim=1).expand(self.n_critics, -1, -1)
-        return self.q(self.body(torch.cat([observed, shared], dim=2))).squeeze(2)
+    def value(self, observed: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+        """Q values [n_critics, B] of ``action`` in the states :meth:`observe` read as ``observed``."""
+        first = self._first_layer()
+        h = torch.baddbmm(observed, action.expand(self.n_critics, -1, -1), first.weight[:, -self.action_dim :])
+        if len(self.body) > 0:  # the first layer was the body's; the rest of the body and the output follow
+            h = self.q(self.body[1:](h))
+        return h.squeeze(2)
+
+    def _first_layer(self) -> EnsembleLinear:
+        """The layer that reads the observation's features, the sentence and the action together."""
+        first = self.body[0] if len(self.body) > 0 else self.q
+        assert isinstance(first, EnsembleLinear)
+        return first

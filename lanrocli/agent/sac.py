@@ -239,16 +239,15 @@ class SACAgent:
         not_done = 1.0 - self._tensor(batch.done, torch.float32)
         alpha = self.log_alpha.detach().exp()
 
-        # The critic's, the target critic's and the actor's encoders read this and the next sentences (they
+        # The critic's, the actor's and the target critic's encoders read this and the next sentences (they
         # nearly always coincide) in one pass. A shared encoder learns from the critic's loss alone: the actor
         # reads its summary detached.
-        encoders = [self.critic.encoder, self.target_critic.encoder]
-        if self.actor.encoder is not None:
-            encoders.append(self.actor.encoder)
+        own_encoder = self.actor.encoder is not None
+        encoders = [self.critic.encoder, *([self.actor.encoder] if own_encoder else []), self.target_critic.encoder]
         summaries = encode(encoders, torch.cat([tokens, next_tokens]))
         critic_language = summaries[0, : tokens.shape[0]]
-        next_target_language = summaries[1, tokens.shape[0] :].detach()
-        actor_language, next_actor_language = (summaries[2] if len(encoders) == 3 else summaries[0].detach()).chunk(2)
+        next_target_language = summaries[-1, tokens.shape[0] :].detach()
+        actor_language, next_actor_language = (summaries[1] if own_encoder else summaries[0].detach()).chunk(2)
 
         # Critic: regress on the soft Bellman target of the target critic and the current policy.
         with torch.no_grad():
@@ -258,14 +257,14 @@ class SACAgent:
             if s.clip_target:
                 target_q = target_q.clamp(-1.0 / (1.0 - s.gamma), 0.0)
         observed = self.critic.observe(obs, critic_language, present)
-        q = self.critic.value(observed, critic_language, action)
+        q = self.critic.value(observed, action)
         critic_loss = (q - target_q).pow(2).mean(dim=1).sum()
 
         # Actor: maximise the critic's value plus entropy. The critic judges the policy's actions in the states
         # it has just read (detached) and is frozen meanwhile, so this loss sends gradient to the actor only.
         pi_action, log_prob = self.actor.sample(obs, actor_language, self.generator, present)
         self.critic.requires_grad_(False)
-        q_pi = self.critic.value(observed.detach(), critic_language.detach(), pi_action).min(dim=0).values
+        q_pi = self.critic.value(observed.detach(), pi_action).min(dim=0).values
         self.critic.requires_grad_(True)
         actor_loss = (alpha * log_prob - q_pi).mean()
 

@@ -25,11 +25,13 @@ def _tokens(lengths: list[int], width: int) -> torch.Tensor:
     return tokens
 
 
-def _ours(embeddings: list[nn.Embedding], grus: list[nn.GRU], tokens: torch.Tensor) -> torch.Tensor:
+def _ours(
+    embeddings: list[nn.Embedding], grus: list[nn.GRU], tokens: torch.Tensor, trained: int | None = None
+) -> torch.Tensor:
     tables = torch.stack([e.weight @ g.weight_ih_l0.t() + g.bias_ih_l0 for e, g in zip(embeddings, grus)])
     weight_hh = torch.stack([g.weight_hh_l0 for g in grus])
     bias_hh = torch.stack([g.bias_hh_l0 for g in grus])
-    return read_sentences(tables, weight_hh, bias_hh, tokens, pad_id=0)
+    return read_sentences(tables, weight_hh, bias_hh, tokens, pad_id=0, trained=trained)
 
 
 def _reference(embeddings: list[nn.Embedding], grus: list[nn.GRU], tokens: torch.Tensor) -> torch.Tensor:
@@ -69,6 +71,21 @@ def test_a_member_gets_no_gradient_from_another_members_output() -> None:
     ours = _ours(embeddings, grus, tokens)
     grads = torch.autograd.grad(ours[0].sum(), [*grus[1].parameters(), embeddings[1].weight], allow_unused=True)
     assert all(g is None or torch.count_nonzero(g) == 0 for g in grads)
+
+
+def test_members_past_the_trained_ones_step_along_without_gradients() -> None:
+    embeddings, grus = _grus(3)
+    tokens = _tokens([3, 6, 1, 6], width=7)
+    weights = torch.randn(3, tokens.shape[0], SIZE, dtype=torch.float64)
+    parameters = [[*e.parameters(), *g.parameters()] for e, g in zip(embeddings, grus)]
+    all_trained = _ours(embeddings, grus, tokens)
+    expected = torch.autograd.grad((all_trained * weights).sum(), parameters[0] + parameters[1])
+    two_trained = _ours(embeddings, grus, tokens, trained=2)
+    grads = torch.autograd.grad((two_trained * weights).sum(), parameters[0] + parameters[1] + parameters[2])
+    torch.testing.assert_close(two_trained, all_trained)
+    for mine, theirs in zip(grads, expected):
+        torch.testing.assert_close(mine, theirs)
+    assert all(torch.count_nonzero(g) == 0 for g in grads[len(expected) :])
 
 
 def test_a_batch_without_words_reads_zeros() -> None:

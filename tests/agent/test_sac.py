@@ -106,6 +106,48 @@ def test_grounding_loss_is_zero_without_readers_weight_or_relabelled_rows() -> N
     assert _agent(architecture="objects").update(_grounding_batch(rng))["grounding_loss"] > 0.0
 
 
+@pytest.mark.parametrize(("architecture", "depth"), [("flat", 1), ("objects", 1), ("flat", 0), ("objects", 2)])
+def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(architecture: str, depth: int) -> None:
+    """The update shares work between the losses (one pass of the encoders, the critic's reading of the
+    states reused for the policy's action, one backward pass); the gradients must be those of the three
+    losses written out one by one."""
+    rng = np.random.default_rng(0)
+    agent = _agent(critics=2, architecture=architecture, hidden_layers=depth, grounding=0.0)
+    agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
+    batch = _batch(rng)
+    reference = SACAgent.from_state_dict(agent.state_dict())
+    agent.optimizer.step = lambda: None  # type: ignore[method-assign,assignment,return-value]  # keep the gradients
+    agent.update(batch)
+
+    r = reference
+    obs, present = r._observe(batch.obs)
+    next_obs, next_present = r._observe(batch.next_obs)
+    tokens, next_tokens = torch.as_tensor(batch.instruction), torch.as_tensor(batch.next_instruction)
+    alpha = r.log_alpha.exp()
+    with torch.no_grad():  # the exploration noise is drawn in the update's order: next actions first
+        next_action, next_log_prob = r.actor.sample(next_obs, r.actor.encoder(next_tokens), r.generator, next_present)
+        next_q = r.target_critic(next_obs, r.target_critic.encoder(next_tokens), next_action, next_present)
+        not_done = 1.0 - torch.as_tensor(batch.done, dtype=torch.float32)
+        target = torch.as_tensor(batch.reward) + r.settings.gamma * not_done * (next_q.min(0).values - alpha * next_log_prob)
+        target = target.clamp(-1.0 / (1.0 - r.settings.gamma), 0.0)
+    critic_language = r.critic.encoder(tokens)
+    q = r.critic(obs, critic_language, torch.as_tensor(batch.action), present)
+    critic_loss = (q - target).pow(2).mean(dim=1).sum()
+    pi_action, log_prob = r.actor.sample(obs, r.actor.encoder(tokens), r.generator, present)
+    q_pi = r.critic(obs, critic_language.detach(), pi_action, present).min(dim=0).values
+    actor_loss = (alpha.detach() * log_prob - q_pi).mean()
+    alpha_loss = -(r.log_alpha * (log_prob.detach() + r.target_entropy)).mean()
+
+    for network, loss in ((r.critic, critic_loss), (r.actor, actor_loss)):
+        mine = dict(agent.critic.named_parameters() if network is r.critic else agent.actor.named_parameters())
+        expected = torch.autograd.grad(loss, list(network.parameters()), retain_graph=True, allow_unused=True)
+        for (name, _), grad in zip(network.named_parameters(), expected):
+            got = mine[name].grad
+            want = torch.zeros_like(mine[name]) if grad is None else grad
+            torch.testing.assert_close(torch.zeros_like(want) if got is None else got, want, rtol=1e-4, atol=1e-6)
+    torch.testing.assert_close(agent.log_alpha.grad, torch.autograd.grad(alpha_loss, r.log_alpha)[0])
+
+
 def test_critic_loss_falls_on_a_fixed_batch() -> None:
     agent = _agent()
     batch = _batch(np.random.default_rng(1), 128)
