@@ -4,7 +4,7 @@ PyTorch has no fused GRU kernel on CPU: ``nn.GRU`` runs each time step as a hand
 autograd records every one of them, so reading a batch's sentences was the largest single cost of an update
 on CPU. Here:
 
-- the GRUs of the networks that read a batch (critic, target critic, actor) step together, one batched
+- the GRUs of the networks that read a batch (critic, actor, target critic) step together, one batched
   product per step;
 - a GRU's input depends on the word alone, so a table of each word's input gates (one small product per
   update) replaces a product per word of the batch;
@@ -59,6 +59,7 @@ class _LastState(torch.autograd.Function):
         h = inputs.new_zeros(members, rows, size)
         finished: list[torch.Tensor] = []  # the final states of rows whose sentence has ended, last rows first
         saved: tuple[list[torch.Tensor], ...] = ([], [], [], [])  # h before the step, r and z, n, h W_hn + b_hn
+        keep = trained > 0 and any(ctx.needs_input_grad)
         start = 0
         for k in active:
             if k < h.shape[1]:
@@ -69,10 +70,11 @@ class _LastState(torch.autograd.Function):
             start += k
             rz = torch.sigmoid(x[..., : 2 * size] + hidden[..., : 2 * size])
             n = _tanh(torch.addcmul(x[..., 2 * size :], rz[..., :size], hidden[..., 2 * size :]))
-            for store, value in zip(saved, (h, rz, n, hidden[..., 2 * size :])):
-                store.append(value)
+            if keep:
+                for store, value in zip(saved, (h, rz, n, hidden[..., 2 * size :])):
+                    store.append(value)
             h = torch.addcmul(n, rz[..., size:], h - n)
-        if any(ctx.needs_input_grad):
+        if keep:
             ctx.save_for_backward(
                 weight_hh[:trained], *(torch.cat([value[:trained] for value in values], dim=1) for values in saved)
             )
@@ -137,7 +139,7 @@ def read_sentences(
     if not active:
         return input_tables.new_zeros(members, rows, size)
     inputs = input_tables.index_select(1, tokens[order].t()[reading])
-    trained = members if trained is None else trained
+    trained = (members if trained is None else trained) if torch.is_grad_enabled() else 0
     h = _LastState.apply(inputs, weight_hh, bias_hh, active, trained)  # the rows with words, longest first
     h = torch.cat([h, h.new_zeros(members, rows - active[0], size)], dim=1)
     return h.index_select(1, torch.argsort(order))
