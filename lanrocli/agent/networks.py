@@ -34,9 +34,9 @@ class LanguageEncoder(nn.Module):
     never read as words and the summary does not depend on the padded length. Padding is assumed to follow
     the words, as :meth:`Vocabulary.encode` puts it.
 
-    The ``nn.GRU`` module holds the weights (and draws them as PyTorch does); :func:`encode` runs the
-    equations itself, so that the encoders of several networks read a batch together (see
-    :mod:`lanrocli.agent.gru`).
+    Acting reads a few sentences at a time with the ``nn.GRU`` module, one fused call; an update reads a
+    batch's sentences with :func:`encode`, which steps the encoders of several networks together and is
+    tested to give the same summaries and gradients (see :mod:`lanrocli.agent.gru`).
     """
 
     def __init__(self, vocab_size: int, embedding_size: int, hidden_size: int) -> None:
@@ -48,7 +48,12 @@ class LanguageEncoder(nn.Module):
 
     def forward(self, tokens: torch.Tensor) -> torch.Tensor:
         """``tokens``: int64 [B, L] ids padded with 0. Returns float [B, hidden]."""
-        return encode([self], tokens)[0]
+        sentences, inverse = _distinct(tokens, self.vocab_size)
+        lengths = (sentences != PAD_ID).sum(dim=1)
+        states, _ = self.gru(self.embedding(sentences[:, : max(int(lengths.max()), 1)]))
+        summary = states[torch.arange(sentences.shape[0], device=tokens.device), (lengths - 1).clamp(min=0)]
+        # An empty sentence has read no word: its summary is the GRU's initial state, zero.
+        return (summary * (lengths > 0).unsqueeze(1).to(summary.dtype))[inverse]
 
 
 def encode(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> torch.Tensor:
@@ -80,9 +85,8 @@ def _distinct(tokens: torch.Tensor, vocab_size: int) -> tuple[torch.Tensor, torc
 def _summarise(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> torch.Tensor:
     """Every row of ``tokens`` read by every encoder, [encoders, B, hidden]; an empty row reads as zeros."""
     grus = [encoder.gru for encoder in encoders]
-    tables = torch.stack(
-        [torch.addmm(gru.bias_ih_l0, encoder.embedding.weight, gru.weight_ih_l0.t()) for encoder, gru in zip(encoders, grus)]
-    )
+    words = [encoder.embedding.weight for encoder in encoders]
+    tables = torch.stack([torch.addmm(gru.bias_ih_l0, word, gru.weight_ih_l0.t()) for word, gru in zip(words, grus)])
     weight_hh = torch.stack([gru.weight_hh_l0 for gru in grus])
     bias_hh = torch.stack([gru.bias_hh_l0 for gru in grus])
     learning = [any(p.requires_grad for p in encoder.parameters()) for encoder in encoders]

@@ -5,7 +5,16 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, LanguageEncoder, ObjectLayout, SceneReader, _summarise
+from lanrocli.agent.networks import (
+    Actor,
+    Critic,
+    EnsembleLinear,
+    LanguageEncoder,
+    ObjectLayout,
+    SceneReader,
+    _summarise,
+    encode,
+)
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.language import grammar_vocabulary, sample_sentence
 
@@ -53,6 +62,14 @@ def test_repeated_sentences_give_the_gradients_of_encoding_every_row() -> None:
     (_summarise([reference], tokens)[0] * weights).sum().backward()
     for a, b in zip(shared.parameters(), reference.parameters()):
         torch.testing.assert_close(a.grad, b.grad)
+
+
+def test_encoding_together_gives_each_encoders_own_summaries() -> None:
+    first, second = _encoder(0), _encoder(1)
+    tokens = torch.cat([_sentences(20), torch.zeros(2, VOCAB.max_length, dtype=torch.int64)])
+    together = encode([first, second], tokens)
+    torch.testing.assert_close(together[0], first(tokens))
+    torch.testing.assert_close(together[1], second(tokens))
 
 
 def test_an_empty_sentence_reads_nothing() -> None:

@@ -128,7 +128,8 @@ def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(architecture
         next_action, next_log_prob = r.actor.sample(next_obs, r.actor.encoder(next_tokens), r.generator, next_present)
         next_q = r.target_critic(next_obs, r.target_critic.encoder(next_tokens), next_action, next_present)
         not_done = 1.0 - torch.as_tensor(batch.done, dtype=torch.float32)
-        target = torch.as_tensor(batch.reward) + r.settings.gamma * not_done * (next_q.min(0).values - alpha * next_log_prob)
+        soft_value = next_q.min(0).values - alpha * next_log_prob
+        target = torch.as_tensor(batch.reward) + r.settings.gamma * not_done * soft_value
         target = target.clamp(-1.0 / (1.0 - r.settings.gamma), 0.0)
     critic_language = r.critic.encoder(tokens)
     q = r.critic(obs, critic_language, torch.as_tensor(batch.action), present)
