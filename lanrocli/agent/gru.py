@@ -110,8 +110,9 @@ class _LastState(torch.autograd.Function):
         grad_weight = torch.bmm(hidden_all.transpose(1, 2), before)
         grads = (grad_inputs, grad_weight, hidden_all.sum(dim=1))
         if ctx.frozen:
-            grads = tuple(torch.cat([g, g.new_zeros(ctx.frozen, *g.shape[1:])]) for g in grads)
+            grads = tuple(torch.cat([part, part.new_zeros(ctx.frozen, *part.shape[1:])]) for part in grads)
         return *grads, None, None
+
 
 def read_sentences(
     input_tables: torch.Tensor,
