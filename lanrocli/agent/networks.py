@@ -170,9 +170,12 @@ class SceneReader(nn.Module):
         scores = (keys * self.query(language).unsqueeze(2)).sum(dim=-1) / math.sqrt(keys.shape[-1])
         return scores.masked_fill(~present, torch.finfo(scores.dtype).min)
 
-    def forward(self, obs: torch.Tensor, language: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, obs: torch.Tensor, language: torch.Tensor, present: torch.Tensor, scores: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """``scores``: :meth:`scores` of these arguments, when the caller has computed them already."""
         arm, objects = self.layout.split(obs)
-        weights = self.scores(obs, language, present).softmax(dim=-1)
+        weights = (self.scores(obs, language, present) if scores is None else scores).softmax(dim=-1)
         named = (weights.unsqueeze(-1) * objects).sum(dim=-2)
         return torch.cat([arm.expand(self.members, -1, -1), named], dim=2)
 
@@ -219,12 +222,17 @@ class Actor(nn.Module):
         self.log_std_max = log_std_max
 
     def forward(
-        self, obs: torch.Tensor, language: torch.Tensor, present: torch.Tensor | None = None
+        self,
+        obs: torch.Tensor,
+        language: torch.Tensor,
+        present: torch.Tensor | None = None,
+        scores: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """The mean and log standard deviation of the Gaussian before the squashing."""
+        """The mean and log standard deviation of the Gaussian before the squashing. ``scores``: the
+        reader's attention logits for these arguments, when the caller has them already."""
         if self.reader is not None:
             assert present is not None, "an object-wise actor needs to know which slots hold objects"
-            obs = self.reader(obs, language, present)[0]
+            obs = self.reader(obs, language, present, scores)[0]
         h = self.body(torch.cat([F.relu(self.obs_layer(obs)), language], dim=1))
         log_std = self.log_std(h).clamp(self.log_std_min, self.log_std_max)
         return self.mean(h), log_std
@@ -235,13 +243,14 @@ class Actor(nn.Module):
         language: torch.Tensor,
         generator: torch.Generator,
         present: torch.Tensor | None = None,
+        scores: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """A reparameterised action in [-1, 1] and its log-probability under the squashed Gaussian.
 
         The noise comes from ``generator`` (never torch's global one) so that the agent's random stream is
         part of its saved state and a resumed run draws the same actions.
         """
-        mean, log_std = self(obs, language, present)
+        mean, log_std = self(obs, language, present, scores)
         std = log_std.exp()
         noise = torch.randn(mean.shape, generator=generator, device=mean.device, dtype=mean.dtype)
         u = mean + std * noise
@@ -297,9 +306,16 @@ class Critic(nn.Module):
         """Q values of shape [n_critics, B]."""
         return self.value(self.observe(obs, language, present), action)
 
-    def observe(self, obs: torch.Tensor, language: torch.Tensor, present: torch.Tensor | None = None) -> torch.Tensor:
+    def observe(
+        self,
+        obs: torch.Tensor,
+        language: torch.Tensor,
+        present: torch.Tensor | None = None,
+        scores: torch.Tensor | None = None,
+    ) -> torch.Tensor:
         """Everything each member computes before it sees the action: the first layer after the observation
         layer, applied to the observation's features and the sentence summary (its action columns left out).
+        ``scores``: the readers' attention logits for these arguments, when the caller has them already.
 
         Split from :meth:`value` so that an update that judges two actions in the same states (the stored
         one and the policy's) reads the states once: the policy's action then costs a product with the
@@ -307,7 +323,7 @@ class Critic(nn.Module):
         """
         if self.reader is not None:
             assert present is not None, "an object-wise critic needs to know which slots hold objects"
-            obs = self.reader(obs, language, present)
+            obs = self.reader(obs, language, present, scores)
         observed = F.relu(self.obs_layer(obs))
         first = self._first_layer()
         state = torch.cat([observed, language.expand(self.n_critics, -1, -1)], dim=2)

@@ -256,19 +256,25 @@ class SACAgent:
             target_q = reward + s.gamma * not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
             if s.clip_target:
                 target_q = target_q.clamp(-1.0 / (1.0 - s.gamma), 0.0)
-        observed = self.critic.observe(obs, critic_language, present)
+        # Object-wise readers weigh the objects once per network: the same attention serves the networks and
+        # the grounding loss.
+        critic_scores = actor_scores = None
+        if self.critic.reader is not None and self.actor.reader is not None:
+            critic_scores = self.critic.reader.scores(obs, critic_language, present)
+            actor_scores = self.actor.reader.scores(obs, actor_language, present)
+        observed = self.critic.observe(obs, critic_language, present, critic_scores)
         q = self.critic.value(observed, action)
         critic_loss = (q - target_q).pow(2).mean(dim=1).sum()
 
         # Actor: maximise the critic's value plus entropy. The critic judges the policy's actions in the states
         # it has just read (detached) and is frozen meanwhile, so this loss sends gradient to the actor only.
-        pi_action, log_prob = self.actor.sample(obs, actor_language, self.generator, present)
+        pi_action, log_prob = self.actor.sample(obs, actor_language, self.generator, present, actor_scores)
         self.critic.requires_grad_(False)
         q_pi = self.critic.value(observed.detach(), pi_action).min(dim=0).values
         self.critic.requires_grad_(True)
         actor_loss = (alpha * log_prob - q_pi).mean()
 
-        grounding_loss = self._grounding_loss(batch, obs, present, critic_language, actor_language)
+        grounding_loss = self._grounding_loss(batch, critic_scores, actor_scores)
 
         # Temperature: raise alpha when the policy's entropy falls below the target, lower it above. (Without
         # tuning, log_alpha has no gradient and this loss is only reported.)
@@ -293,23 +299,19 @@ class SACAgent:
         return dict(zip(names, metrics))
 
     def _grounding_loss(
-        self,
-        batch: Batch,
-        obs: torch.Tensor,
-        present: torch.Tensor | None,
-        critic_language: torch.Tensor,
-        actor_language: torch.Tensor,
+        self, batch: Batch, critic_scores: torch.Tensor | None, actor_scores: torch.Tensor | None
     ) -> torch.Tensor:
-        """Cross-entropy of the actor's and each critic's attention against the object that a relabelled
-        sentence names; zero without object-wise readers, a weight of 0 or relabelled transitions."""
+        """Cross-entropy of the actor's and each critic's attention (logits [members, B, slots]) against the
+        object that a relabelled sentence names; zero without object-wise readers, a weight of 0 or
+        relabelled transitions."""
         rows = torch.as_tensor(np.flatnonzero(batch.named >= 0), device=self.device)
-        if present is None or self.settings.grounding == 0.0 or rows.numel() == 0:
+        if critic_scores is None or actor_scores is None or self.settings.grounding == 0.0 or rows.numel() == 0:
             return torch.zeros((), device=self.device)
         named = self._tensor(batch.named, torch.int64)[rows]
         loss = torch.zeros((), device=self.device)
-        for network, language in ((self.critic, critic_language), (self.actor, actor_language)):
-            scores = network.reader.scores(obs[rows], language[rows], present[rows])  # [members, rows, slots]
-            loss = loss + F.cross_entropy(scores.flatten(0, 1), named.repeat(scores.shape[0]))
+        for scores in (critic_scores, actor_scores):
+            chosen = scores[:, rows]  # [members, rows, slots]
+            loss = loss + F.cross_entropy(chosen.flatten(0, 1), named.repeat(chosen.shape[0]))
         return loss
 
     def learn(self, buffer: ReplayBuffer, rng: np.random.Generator, n_updates: int) -> dict[str, float]:

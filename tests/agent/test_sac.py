@@ -8,6 +8,7 @@ import io
 import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 
 from lanrocli.agent import Batch, ObjectLayout, ReplayBuffer, SACAgent, SACSettings
 
@@ -106,15 +107,20 @@ def test_grounding_loss_is_zero_without_readers_weight_or_relabelled_rows() -> N
     assert _agent(architecture="objects").update(_grounding_batch(rng))["grounding_loss"] > 0.0
 
 
-@pytest.mark.parametrize(("architecture", "depth"), [("flat", 1), ("objects", 1), ("flat", 0), ("objects", 2)])
-def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(architecture: str, depth: int) -> None:
-    """The update shares work between the losses (one pass of the encoders, the critic's reading of the
-    states reused for the policy's action, one backward pass); the gradients must be those of the three
-    losses written out one by one."""
+@pytest.mark.parametrize(
+    ("architecture", "depth", "grounding"), [("flat", 1, 0.0), ("objects", 1, 1.0), ("flat", 0, 0.0), ("objects", 2, 0.5)]
+)
+def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
+    architecture: str, depth: int, grounding: float
+) -> None:
+    """The update shares work between the losses (one pass of the encoders, the readers' attention computed
+    once for the networks and the grounding loss, the critic's reading of the states reused for the policy's
+    action, one backward pass); the gradients must be those of the losses written out one by one."""
     rng = np.random.default_rng(0)
-    agent = _agent(critics=2, architecture=architecture, hidden_layers=depth, grounding=0.0)
+    agent = _agent(critics=2, architecture=architecture, hidden_layers=depth, grounding=grounding)
     agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
-    batch = _batch(rng)
+    batch = _grounding_batch(rng)
+    batch.named[::3] = -1  # not relabelled: no grounding label
     reference = SACAgent.from_state_dict(agent.state_dict())
     agent.optimizer.step = lambda: None  # type: ignore[method-assign,assignment,return-value]  # keep the gradients
     agent.update(batch)
@@ -134,12 +140,23 @@ def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(architecture
     critic_language = r.critic.encoder(tokens)
     q = r.critic(obs, critic_language, torch.as_tensor(batch.action), present)
     critic_loss = (q - target).pow(2).mean(dim=1).sum()
-    pi_action, log_prob = r.actor.sample(obs, r.actor.encoder(tokens), r.generator, present)
+    actor_language = r.actor.encoder(tokens)
+    pi_action, log_prob = r.actor.sample(obs, actor_language, r.generator, present)
     q_pi = r.critic(obs, critic_language.detach(), pi_action, present).min(dim=0).values
     actor_loss = (alpha.detach() * log_prob - q_pi).mean()
     alpha_loss = -(r.log_alpha * (log_prob.detach() + r.target_entropy)).mean()
+    # Grounding: each reader's attention on the relabelled rows alone, against the object they name.
+    rows = torch.as_tensor(np.flatnonzero(batch.named >= 0))
+    named = torch.as_tensor(batch.named)[rows]
+    critic_grounding = actor_grounding = torch.zeros(())
+    if architecture == "objects":
+        critic_scores = r.critic.reader.scores(obs[rows], critic_language[rows], present[rows])
+        actor_scores = r.actor.reader.scores(obs[rows], actor_language[rows], present[rows])
+        critic_grounding = F.cross_entropy(critic_scores.flatten(0, 1), named.repeat(critic_scores.shape[0]))
+        actor_grounding = F.cross_entropy(actor_scores[0], named)
 
-    for network, loss in ((r.critic, critic_loss), (r.actor, actor_loss)):
+    losses = ((r.critic, critic_loss + grounding * critic_grounding), (r.actor, actor_loss + grounding * actor_grounding))
+    for network, loss in losses:
         mine = dict(agent.critic.named_parameters() if network is r.critic else agent.actor.named_parameters())
         expected = torch.autograd.grad(loss, list(network.parameters()), retain_graph=True, allow_unused=True)
         for (name, _), grad in zip(network.named_parameters(), expected):
