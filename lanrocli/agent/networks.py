@@ -171,9 +171,14 @@ class SceneReader(nn.Module):
         return scores.masked_fill(~present, torch.finfo(scores.dtype).min)
 
     def forward(
-        self, obs: torch.Tensor, language: torch.Tensor, present: torch.Tensor, scores: torch.Tensor | None = None
+        self,
+        obs: torch.Tensor,
+        language: torch.Tensor,
+        present: torch.Tensor | None,
+        scores: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """``scores``: :meth:`scores` of these arguments, when the caller has computed them already."""
+        assert present is not None, "an object-wise network needs to know which slots hold objects"
         arm, objects = self.layout.split(obs)
         weights = (self.scores(obs, language, present) if scores is None else scores).softmax(dim=-1)
         named = (weights.unsqueeze(-1) * objects).sum(dim=-2)
@@ -231,7 +236,6 @@ class Actor(nn.Module):
         """The mean and log standard deviation of the Gaussian before the squashing. ``scores``: the
         reader's attention logits for these arguments, when the caller has them already."""
         if self.reader is not None:
-            assert present is not None, "an object-wise actor needs to know which slots hold objects"
             obs = self.reader(obs, language, present, scores)[0]
         h = self.body(torch.cat([F.relu(self.obs_layer(obs)), language], dim=1))
         log_std = self.log_std(h).clamp(self.log_std_min, self.log_std_max)
@@ -322,7 +326,6 @@ class Critic(nn.Module):
         action's few columns instead of the whole layer, forward and backward.
         """
         if self.reader is not None:
-            assert present is not None, "an object-wise critic needs to know which slots hold objects"
             obs = self.reader(obs, language, present, scores)
         observed = F.relu(self.obs_layer(obs))
         first = self._first_layer()
