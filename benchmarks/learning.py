@@ -8,7 +8,9 @@ Each setting is a one-stage curriculum run by the same pipeline as ``lanro train
 folder: ``metrics.csv`` gets one row per evaluation (environment steps, wall time, success on fixed
 evaluation episodes with the deterministic policy, success on correction episodes, losses), ``lanro plot``
 draws it, and ``--resume`` continues it after a crash or kill. ``--target`` ends the run once the
-evaluation success (on correction episodes, for the second setting) reaches it.
+evaluation success (on correction episodes, for the second setting) reaches it. ``--random-start P``
+starts that share of the training episodes with the hand at a random point near the table (evaluation
+always starts from the neutral pose).
 """
 
 from __future__ import annotations
@@ -35,8 +37,9 @@ SETTINGS = {
 
 
 def curriculum(setting: str, steps: int, seed: int, envs: int, every: int, episodes: int, target: float | None,
-               agent: dict[str, Any]) -> Curriculum:
-    stage: dict[str, Any] = {"name": setting, "env": SETTINGS[setting], "budget": {"steps": steps}}
+               agent: dict[str, Any], random_start: float = 0.0) -> Curriculum:
+    env = {**SETTINGS[setting], "random_start": random_start}
+    stage: dict[str, Any] = {"name": setting, "env": env, "budget": {"steps": steps}}
     if target is not None:
         stage["promote"] = {"success": target, "on": "corrections" if setting == "corrections" else "overall"}
     return Curriculum.model_validate(
@@ -80,6 +83,10 @@ def main() -> None:
     parser.add_argument("--eval-every", type=int, default=10_000)
     parser.add_argument("--eval-episodes", type=int, default=50)
     parser.add_argument("--target", type=float, help="stop once evaluation success reaches this")
+    parser.add_argument(
+        "--random-start", type=float, default=0.0, metavar="P",
+        help="share of training episodes that start with the hand at a random point near the table",
+    )
     parser.add_argument("--device", choices=["cpu", "cuda"], help="default: cuda if available, else cpu")
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
@@ -92,7 +99,7 @@ def main() -> None:
     device = pick_device(args.device)
     plan = curriculum(
         args.setting, args.steps, args.seed, args.envs, args.eval_every, args.eval_episodes, args.target,
-        {**AGENT, **agent_overrides(args.agent)},
+        {**AGENT, **agent_overrides(args.agent)}, args.random_start,
     )
     if args.resume:
         run = CurriculumRun.resume(args.out, plan, device, Printer())

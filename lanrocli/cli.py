@@ -183,6 +183,8 @@ def _env_summary(env: dict[str, object]) -> str:
             parts.append("rare words")
         if env.get("kinds"):
             parts.append("kinds " + ",".join(env["kinds"]))  # type: ignore[arg-type]
+    if env.get("random_start"):
+        parts.append(f"random starts {env['random_start']:g}")
     return ", ".join(parts)
 
 
@@ -280,7 +282,7 @@ def _load_agent_policy(
         raise fail(f"cannot load a trained agent from {path}: {error}") from None
     if task is not None and task.value != settings.task:
         raise fail(f"{directory} was trained on {settings.task}; it cannot be evaluated on {task.value}")
-    env_settings = {**settings.env, **overrides}
+    env_settings = {**settings.env, "random_start": 0.0, **overrides}  # measured from the neutral pose
     if int(env_settings.get("objects", 2)) > settings.slots:  # type: ignore[call-overload]
         raise fail(f"{directory} observes at most {settings.slots} objects; --objects must not exceed that")
     return settings.task, env_settings, settings.slots, AgentPolicy(agent)

@@ -12,7 +12,7 @@ from lanrocli.envs.instructor import Instructor, InstructorSettings, Kind
 from lanrocli.envs.scene import Mode, Scene, sample_scene
 from lanrocli.envs.tasks import TaskView, make_task
 from lanrocli.language import COLOURS, SHAPES, grammar_vocabulary
-from lanrocli.sim import OBJECT_AREA, SHAPES as SIM_SHAPES, ObjectSet, Panda, World, resting_position
+from lanrocli.sim import OBJECT_AREA, SHAPES as SIM_SHAPES, WORKSPACE, ObjectSet, Panda, World, resting_position
 
 ARM_SIZE = 7
 """End-effector position (3), its linear velocity (3), finger width (1)."""
@@ -27,6 +27,22 @@ MIN_SPACING_SIZES = 3.0
 """Objects start at least this many object sizes apart."""
 
 IMAGE_SIZE = (480, 360)
+
+START_HEIGHT = (WORKSPACE.low[2], 0.10)
+"""Heights (m) of the end effector at a random start: from the workspace floor to the neutral pose's."""
+
+START_CLEARANCE = 0.01
+"""A random start keeps every part of the arm this far (m) from every object."""
+
+FALLEN = -0.05
+"""An object whose centre is lower than this (m) has fallen off the table; the episode ends there.
+
+Nothing stops a falling object (the world has no floor), and a fall in the replay buffer is an object tens
+of metres down by the end of the episode: a reach run that pushed objects off in 2% of its steps had its
+normaliser scale object heights by 2.7 m instead of millimetres."""
+
+START_TRIES = 50
+"""Random start positions tried before falling back to the neutral pose (about one in three is clear)."""
 
 
 def observation_size(n_objects: int) -> int:
@@ -53,9 +69,13 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     -1 in states the critic cannot tell from those where it earns 0. The relative position is redundant but
     not idle: what every task needs first is the offset from the hand to the named object.
 
+    Episodes start with the end effector at (0, 0, 0.10); ``random_start`` is the share that starts at a
+    random point of the workspace near the table instead, clear of the objects (for training).
+
     ``instruction`` is the current goal sentence (instruction, plus the correction from the step it is
     spoken) in the grammar-wide vocabulary, padded with 0. Reward is 0 when the task holds for the goal
-    object, else -1; success ends the episode. ``info`` carries ``is_success``, ``achieved`` (per object),
+    object, else -1; success ends the episode (terminated), and so does an object falling off the table
+    (truncated). ``info`` carries ``is_success``, ``achieved`` (per object),
     ``goal_index``, ``object_positions``, ``objects``, ``instruction_text``, ``challenge`` (the
     misunderstanding of a correction episode, or ``None``) and ``correction`` (``None`` until spoken).
     """
@@ -74,6 +94,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         kinds: Sequence[str] | None = None,
         max_episode_steps: int | None = None,
         object_slots: int | None = None,
+        random_start: float = 0.0,
         render_mode: str | None = None,
         gui: bool = False,
     ) -> None:
@@ -90,6 +111,9 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if max_episode_steps is not None and max_episode_steps < 1:
             raise ValueError(f"max_episode_steps must be positive, got {max_episode_steps}")
+        if not 0.0 <= random_start <= 1.0:
+            raise ValueError(f"random_start must be a probability within [0, 1], got {random_start}")
+        self.random_start = float(random_start)
         self.task = make_task(task)
         self.settings = InstructorSettings(
             correction_rate=correction_rate,
@@ -154,7 +178,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.objects.clear()
         for obj, (x, y) in zip(scene.objects, scene.positions):
             self.objects.spawn(obj.shape, obj.colour, resting_position(obj.shape, x, y))
-        self.robot.reset(finger_width=0.08 if self.task.gripper else 0.0)
+        self._reset_arm(rng)
         self._start_positions = np.array(self.objects.states().positions)
         self._heights = np.array([SIM_SHAPES[o.shape].height for o in scene.objects])
         self._object_words = tuple((o.colour, o.shape) for o in scene.objects)
@@ -168,6 +192,22 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._achieved = self._evaluate()
         return self._observation(), self._info()
 
+    def _reset_arm(self, rng: np.random.Generator) -> None:
+        """The neutral pose, or with probability ``random_start`` a random point clear of the objects.
+
+        A correction leaves the hand low beside the wrong object, a state the neutral start (10 cm up, in
+        the middle) seldom leads to; random starts near the table make it common in training.
+        """
+        width = 0.08 if self.task.gripper else 0.0
+        if self.random_start > 0.0 and rng.random() < self.random_start:
+            low = (*WORKSPACE.low[:2], START_HEIGHT[0])
+            high = (*WORKSPACE.high[:2], START_HEIGHT[1])
+            for _ in range(START_TRIES):
+                self.robot.reset(width, ee_position=rng.uniform(low, high))
+                if self.robot.clear_of(self.objects.body_ids, START_CLEARANCE):
+                    return
+        self.robot.reset(width)
+
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         if self._scene is None:
             raise RuntimeError("call reset() before step()")
@@ -179,7 +219,9 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         if self.instructor.observe(self.np_random, self._steps, self._achieved):
             self._tokens = self.vocabulary.encode(self.instructor.text)
         success = bool(self._achieved[self._scene.goal_index])
-        truncated = not success and self._steps >= self.max_episode_steps
+        # Truncated, not terminated: ending there must not look like the zero future value of a success.
+        fallen = bool(np.any(self.objects.states().positions[:, 2] < FALLEN))
+        truncated = not success and (self._steps >= self.max_episode_steps or fallen)
         return self._observation(), 0.0 if success else -1.0, success, truncated, self._info()
 
     # -- what the agent and the tools see --------------------------------------------------------------

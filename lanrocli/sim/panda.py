@@ -71,6 +71,10 @@ MAX_FINGER_WIDTH = 0.08
 
 FINGER_FRICTION = 1.0
 
+RESET_IK_ROUNDS = 8
+"""IK calls that take the arm from the neutral pose to a reset position anywhere in the workspace; eight
+reach every corner to within a millimetre."""
+
 
 @dataclass(frozen=True)
 class RobotState:
@@ -146,6 +150,7 @@ class Panda:
         self._get_joint_states = client.getJointStates
         self._set_motors = client.setJointMotorControlArray
         self._get_contacts = client.getContactPoints
+        self._get_closest = client.getClosestPoints
         self._finger_target = 0.0
         self._cache_revision = -1
         self._cache: RobotState | None = None
@@ -160,18 +165,34 @@ class Panda:
         """Length of the action vector: 3, or 4 with the gripper."""
         return 4 if self._gripper else 3
 
-    def reset(self, finger_width: float = 0.0) -> None:
-        """Put the arm in the neutral pose at rest, fingers at ``finger_width`` (m).
+    def reset(self, finger_width: float = 0.0, ee_position: npt.ArrayLike | None = None) -> None:
+        """Put the arm at rest in the neutral pose, or pointing down with its end effector at
+        ``ee_position`` (clipped to ``WORKSPACE``); fingers at ``finger_width`` (m).
 
         Without the gripper the fingers always reset closed.
         """
         width = float(np.clip(finger_width, 0.0, MAX_FINGER_WIDTH)) if self._gripper else 0.0
         self._finger_target = width / 2.0
-        positions = [*NEUTRAL_ARM, self._finger_target, self._finger_target]
+        self._teleport(NEUTRAL_ARM)
+        if ee_position is not None:
+            # One IK call moves a few centimetres accurately; from the neutral pose to a far corner takes
+            # a handful, each starting where the last one left the arm.
+            target = WORKSPACE.clip(ee_position).tolist()
+            for _ in range(RESET_IK_ROUNDS):
+                self._teleport(self._ik.solve(target, self.state().joint_positions.tolist()).tolist())
+        self._command(self.state().joint_positions.tolist())
+
+    def _teleport(self, arm: Sequence[float]) -> None:
+        positions = [*arm, self._finger_target, self._finger_target]
         for joint, angle in zip(CONTROLLED_JOINTS, positions, strict=True):
             self._client.resetJointState(self.body_id, joint, angle, 0.0)
-        self._command(positions)
         self._world.invalidate()
+
+    def clear_of(self, body_ids: Sequence[int], margin: float) -> bool:
+        """Whether every part of the arm is at least ``margin`` (m) away from each body in ``body_ids``."""
+        return not any(
+            self._get_closest(bodyA=self.body_id, bodyB=body, distance=margin) for body in body_ids
+        )
 
     def _command(self, positions: Sequence[float]) -> None:
         self._set_motors(

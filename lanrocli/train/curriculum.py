@@ -83,6 +83,9 @@ class EnvConfig(BaseModel):
     """``None`` allows every kind of correction."""
     max_episode_steps: int | None = Field(None, ge=1)
     """``None`` lets the environment choose: longer episodes when corrections give time to recover."""
+    random_start: float = Field(0.0, ge=0.0, le=1.0)
+    """Share of training episodes that start with the hand at a random point near the table instead of
+    the neutral pose; evaluation always starts from the neutral pose."""
 
     @field_validator("kinds")
     @classmethod

@@ -147,11 +147,13 @@ class Trainer:
         self._started = time.perf_counter()
         self._wall_before = 0.0
 
-    def env_factory(self) -> Callable[[], LanroEnv]:
+    def env_factory(self, evaluation: bool = False) -> Callable[[], LanroEnv]:
         """Builds environments of the current stage, observed through the run's object slots. A plain
-        partial, so that subprocesses receive the settings and not the trainer."""
+        partial, so that subprocesses receive the settings and not the trainer. Evaluation environments
+        start every episode from the neutral pose, so success is comparable across runs."""
         s = self.settings
-        return functools.partial(LanroEnv, s.task, object_slots=s.slots, **s.env)
+        env = {**s.env, "random_start": 0.0} if evaluation else s.env
+        return functools.partial(LanroEnv, s.task, object_slots=s.slots, **env)
 
     def enter_stage(self, env: Mapping[str, Any], stage: int) -> None:
         """Collect and evaluate with new environment settings from now on.
@@ -208,7 +210,7 @@ class Trainer:
 
     def evaluate(self, episodes: int | None = None) -> EvaluationReport:
         """The deterministic policy on the stage's fixed evaluation episodes (the same seeds every time)."""
-        env = self.env_factory()()
+        env = self.env_factory(evaluation=True)()
         try:
             return evaluate(env, AgentPolicy(self.agent), episodes or self.settings.eval_episodes, EVAL_SEED)
         finally:

@@ -10,6 +10,7 @@ from gymnasium.utils.env_checker import check_env
 from lanrocli.envs import ENV_IDS, LanroEnv, observation_size
 from lanrocli.envs.policies import make_policy
 from lanrocli.language import all_corrections, all_instructions, grammar_vocabulary
+from lanrocli.sim import WORKSPACE
 
 INFO_KEYS = {
     "is_success",
@@ -168,6 +169,7 @@ def test_two_environments_do_not_interfere() -> None:
         ({"task": "fly"}, "task"),
         ({"max_delay": -2}, "max_delay"),
         ({"kinds": ["gossip"]}, "kinds"),
+        ({"random_start": -0.1}, "random_start"),
     ],
 )
 def test_bad_settings_raise_clear_errors(kwargs: dict, setting: str) -> None:
@@ -211,3 +213,50 @@ def test_object_slots_pad_the_observation_with_zeros() -> None:
     plain.close()
     with pytest.raises(ValueError, match="object_slots"):
         LanroEnv("reach", objects=3, object_slots=2)
+
+
+def test_random_starts_put_the_hand_near_the_table_clear_of_the_objects() -> None:
+    env = LanroEnv("reach", objects=3, mode="color_shape", random_start=1.0)
+    starts = []
+    for seed in range(40):
+        obs, info = env.reset(seed=seed)
+        starts.append(obs["observation"][:3].copy())
+        for _ in range(2):
+            obs, _, _, _, info = env.step(np.zeros(3))
+        assert not env.robot.contacts(env.objects.body_ids).robot.any(), f"seed {seed}: the arm starts on an object"
+        np.testing.assert_allclose(info["object_positions"], env._start_positions, atol=1e-3)
+    starts = np.array(starts)
+    assert np.all(starts >= np.array(WORKSPACE.low) - 1e-3) and np.all(starts[:, 2] <= 0.101)
+    assert starts[:, 2].min() < 0.03  # some start low beside the objects, where corrections leave the hand
+    assert np.std(starts[:, 0]) > 0.05 and np.std(starts[:, 1]) > 0.05
+    again = LanroEnv("reach", objects=3, mode="color_shape", random_start=1.0)
+    np.testing.assert_array_equal(again.reset(seed=7)[0]["observation"], env.reset(seed=7)[0]["observation"])
+    env.close()
+    again.close()
+
+
+def test_random_start_share_is_respected_and_zero_changes_nothing() -> None:
+    half = LanroEnv("reach", random_start=0.5)
+    neutral = [bool(np.allclose(half.reset(seed=s)[0]["observation"][:3], (0, 0, 0.10), atol=2e-3)) for s in range(60)]
+    assert 18 <= sum(neutral) <= 42
+    plain, zero = LanroEnv("reach", correction_rate=0.5), LanroEnv("reach", correction_rate=0.5, random_start=0.0)
+    for seed in range(3):
+        first, info = plain.reset(seed=seed)
+        second, info_zero = zero.reset(seed=seed)
+        np.testing.assert_array_equal(first["observation"], second["observation"])
+        assert info["instruction_text"] == info_zero["instruction_text"]
+    for env in (half, plain, zero):
+        env.close()
+
+
+def test_an_object_falling_off_the_table_truncates_the_episode() -> None:
+    env = LanroEnv("push", objects=2)
+    env.reset(seed=0)
+    _, _, terminated, truncated, _ = env.step(np.zeros(3))
+    assert not (terminated or truncated)
+    body = env.objects.body_ids[1]
+    env.world.client.resetBasePositionAndOrientation(body, (0.5, 0.0, -0.1), (0.0, 0.0, 0.0, 1.0))
+    env.world.invalidate()
+    _, reward, terminated, truncated, info = env.step(np.zeros(3))
+    assert truncated and not terminated and reward == -1.0 and info["object_positions"][1, 2] < -0.1
+    env.close()

@@ -5,7 +5,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from lanrocli.sim import CONTROL_DT, MAX_FINGER_WIDTH, WORKSPACE, Panda, World
+from lanrocli.sim import CONTROL_DT, MAX_FINGER_WIDTH, WORKSPACE, ObjectSet, Panda, World, resting_position
 
 
 def test_reset_puts_end_effector_above_the_table_centre(panda: Panda) -> None:
@@ -144,3 +144,28 @@ def test_reset_restores_neutral_pose(world: World, panda: Panda) -> None:
     panda.reset()
     np.testing.assert_allclose(panda.state().ee_position, neutral, atol=1e-9)
     np.testing.assert_allclose(panda.state().ee_velocity, 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("target", [(0.2, -0.2, 0.02), (-0.2, 0.2, 0.1), (0.05, 0.1, 0.015)])
+def test_reset_can_put_the_end_effector_anywhere_in_the_workspace(
+    world: World, panda: Panda, target: tuple[float, float, float]
+) -> None:
+    panda.reset(ee_position=target)
+    np.testing.assert_allclose(panda.state().ee_position, target, atol=1e-3)
+    np.testing.assert_allclose(panda.state().ee_velocity, 0.0, atol=1e-9)
+    for _ in range(5):  # and the motors hold it there
+        world.step()
+    np.testing.assert_allclose(panda.state().ee_position, target, atol=3e-3)
+    panda.reset()
+    np.testing.assert_allclose(panda.state().ee_position, (0.0, 0.0, 0.10), atol=2e-3)
+
+
+def test_clear_of_tells_whether_the_arm_is_near_a_body(panda: Panda, objects: ObjectSet) -> None:
+    body = objects.spawn("cube", "red", resting_position("cube", 0.1, 0.1)).body_id
+    panda.reset(ee_position=(0.1, 0.1, 0.03))  # fingertips inside the cube
+    assert not panda.clear_of([body], 0.01)
+    panda.reset(ee_position=(0.1, 0.1, 0.08))  # 2 cm above its top
+    assert panda.clear_of([body], 0.01)
+    assert not panda.clear_of([body], 0.05)
+    panda.reset(ee_position=(-0.1, -0.1, 0.02))
+    assert panda.clear_of([body], 0.01)

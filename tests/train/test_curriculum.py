@@ -73,6 +73,7 @@ def test_env_kwargs_leave_environment_defaults_to_the_environment() -> None:
         "max_delay": 0,
         "rare_words": False,
         "kinds": ["ambiguity"],
+        "random_start": 0.0,
     }
 
 
@@ -107,6 +108,14 @@ def test_out_of_range_value_in_second_stage(tmp_path: Path) -> None:
     assert (problem.file, problem.line, problem.path) == (path, 8, "stages[1].env.correction_rate")
     assert "less than or equal to 1" in problem.message
     assert str(problem) == f"{path}:8: stages[1].env.correction_rate: {problem.message}"
+
+
+def test_random_start_is_a_share_of_episodes(tmp_path: Path) -> None:
+    problem = only_problem(write(tmp_path, "c.yaml", MINIMAL + "    env: {random_start: 2}\n"))
+    assert (problem.line, problem.path) == (6, "stages[0].env.random_start")
+    assert "less than or equal to 1" in problem.message
+    stage = load_curriculum(write(tmp_path, "ok.yaml", MINIMAL + "    env: {random_start: 0.5}\n")).stages[0]
+    assert stage.env.env_kwargs()["random_start"] == 0.5
 
 
 def test_empty_stage_list(tmp_path: Path) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import pickle
 import signal
@@ -48,6 +49,16 @@ def test_tiny_training_run_end_to_end() -> None:
     assert any(not torch.equal(a, b) for a, b in zip(before, parameters(trainer)))
     report = trainer.evaluate()
     assert report.overall.episodes == 2 and all(r.length <= 100 for r in report.results)
+
+
+def test_random_starts_are_for_training_only() -> None:
+    trainer = Trainer(dataclasses.replace(SETTINGS, env={**SETTINGS.env, "random_start": 1.0}), AGENT)
+    training, evaluation = trainer.env_factory()(), trainer.env_factory(evaluation=True)()
+    hands = [env.reset(seed=seed)[0]["observation"][:3] for seed in range(3) for env in (training, evaluation)]
+    assert all(not np.allclose(hand, (0.0, 0.0, 0.10), atol=2e-3) for hand in hands[0::2])
+    np.testing.assert_allclose(hands[1::2], [(0.0, 0.0, 0.10)] * 3, atol=2e-3)
+    training.close()
+    evaluation.close()
 
 
 def test_resume_continues_exactly(tmp_path: Path) -> None:
