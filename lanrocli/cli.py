@@ -266,26 +266,21 @@ def _load_agent_policy(
     path: Path, task: TaskName | None, overrides: dict[str, object], device: str | None
 ) -> tuple[str, dict[str, object], int, object]:
     """Task, environment settings, object slots and deterministic policy of the agent saved at ``path``."""
-    from lanrocli.agent import SACAgent
     from lanrocli.train import CheckpointError, pick_device
-    from lanrocli.train.checkpoint import load_agent_state, load_state, resolve_checkpoint
-    from lanrocli.train.trainer import AgentPolicy, TrainSettings
+    from lanrocli.train.trainer import load_policy
 
     if not path.exists():
         raise fail(f"{path} is neither a scripted policy (oracle, mistaken, random) nor an existing checkpoint path")
     try:
-        directory = resolve_checkpoint(path)
-        settings = TrainSettings(**load_state(directory)["train_settings"])
-        torch_device = pick_device(device)
-        agent = SACAgent.from_state_dict(load_agent_state(directory, torch_device), torch_device)
+        settings, policy = load_policy(path, pick_device(device))
     except (CheckpointError, ValueError, KeyError) as error:
         raise fail(f"cannot load a trained agent from {path}: {error}") from None
     if task is not None and task.value != settings.task:
-        raise fail(f"{directory} was trained on {settings.task}; it cannot be evaluated on {task.value}")
+        raise fail(f"{path} was trained on {settings.task}; it cannot be evaluated on {task.value}")
     env_settings = {**settings.env, "random_start": 0.0, **overrides}  # measured from the neutral pose
     if int(env_settings.get("objects", 2)) > settings.slots:  # type: ignore[call-overload]
-        raise fail(f"{directory} observes at most {settings.slots} objects; --objects must not exceed that")
-    return settings.task, env_settings, settings.slots, AgentPolicy(agent)
+        raise fail(f"{path} observes at most {settings.slots} objects; --objects must not exceed that")
+    return settings.task, env_settings, settings.slots, policy
 
 
 @app.command("check")

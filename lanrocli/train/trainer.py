@@ -24,7 +24,14 @@ from lanrocli.envs import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
 from lanrocli.envs.evaluation import EvaluationReport, evaluate
 from lanrocli.envs.tasks import make_task
 from lanrocli.language import grammar_vocabulary
-from lanrocli.train.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from lanrocli.train.checkpoint import (
+    CheckpointError,
+    load_agent_state,
+    load_checkpoint,
+    load_state,
+    resolve_checkpoint,
+    save_checkpoint,
+)
 from lanrocli.train.collect import Collector, state_from_json, state_to_json
 
 EVAL_SEED = 1_000_000
@@ -99,6 +106,15 @@ class AgentPolicy:
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> np.ndarray:
         return self.agent.act(observation, deterministic=True)
+
+
+def load_policy(path: Path, device: str | torch.device = "cpu") -> tuple[TrainSettings, AgentPolicy]:
+    """The settings a checkpoint was trained with and its deterministic policy; ``path`` is a checkpoint,
+    a pointer file or a run folder. Raises CheckpointError, ValueError or KeyError on a bad checkpoint."""
+    directory = resolve_checkpoint(path)
+    settings = TrainSettings(**load_state(directory)["train_settings"])
+    agent = SACAgent.from_state_dict(load_agent_state(directory, device), torch.device(device))
+    return settings, AgentPolicy(agent)
 
 
 @dataclass
