@@ -34,15 +34,15 @@ START_HEIGHT = (WORKSPACE.low[2], 0.10)
 START_CLEARANCE = 0.01
 """A random start keeps every part of the arm this far (m) from every object."""
 
+START_TRIES = 50
+"""Random start positions tried before falling back to the neutral pose (nine in ten are clear)."""
+
 FALLEN = -0.05
 """An object whose centre is lower than this (m) has fallen off the table; the episode ends there.
 
 Nothing stops a falling object (the world has no floor), and a fall in the replay buffer is an object tens
-of metres down by the end of the episode: a reach run that pushed objects off in 2% of its steps had its
-normaliser scale object heights by 2.7 m instead of millimetres."""
-
-START_TRIES = 50
-"""Random start positions tried before falling back to the neutral pose (about one in three is clear)."""
+of metres down by the end of the episode: a reach run with 2% of its stored object positions below the
+table had its normaliser scale object heights by 2.7 m instead of millimetres."""
 
 
 def observation_size(n_objects: int) -> int:
