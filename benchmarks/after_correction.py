@@ -4,8 +4,8 @@ Runs a checkpoint's deterministic policy on correction episodes (from the neutra
 and sorts every episode in which the instructor spoke into:
 
 - *succeeded*: the arm then did the task on the goal object;
-- *knocked*: it failed, and some object ended up farther from its start than reach allows (2.5 cm), which
-  leaves a reach episode unsolvable; *fell* counts the ones that went off the table;
+- *knocked the goal* / *knocked another*: it failed, and that object ended up farther from its start than
+  reach allows (2.5 cm), which leaves a reach episode unsolvable; *fell*: an object went off the table;
 - *fell short*: it failed without disturbing anything; the closest the end effector came to the goal
   object after the correction is reported (median), to tell "went elsewhere" from "stopped near".
 
@@ -49,8 +49,11 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int) -> tuple[str, float] | No
     positions = info["object_positions"]
     if np.any(positions[:, 2] < FALLEN):
         return "fell", closest
-    if np.any(np.linalg.norm(positions - start, axis=1) > REACH_STILL):
-        return "knocked", closest
+    knocked = np.linalg.norm(positions - start, axis=1) > REACH_STILL
+    if knocked[info["goal_index"]]:
+        return "knocked the goal", closest
+    if np.any(knocked):
+        return "knocked another", closest
     return "fell short", closest
 
 
@@ -71,10 +74,10 @@ def main() -> None:
     counts = Counter(kind for kind, _ in spoken)
     print(f"{args.checkpoint}: {settings.task}, kinds {', '.join(args.kinds)}, seeds {args.seed}..")
     print(f"{args.episodes} episodes, a correction was spoken in {len(spoken)}")
-    for kind in ("succeeded", "knocked", "fell", "fell short"):
+    for kind in ("succeeded", "knocked the goal", "knocked another", "fell", "fell short"):
         near = [c for k, c in spoken if k == kind and np.isfinite(c)]
         median = f", closest approach to the goal after it: median {np.median(near) * 100:.1f} cm" if near else ""
-        print(f"  {kind:<11} {counts[kind]:>4}{median}")
+        print(f"  {kind:<16} {counts[kind]:>4}{median}")
 
 
 if __name__ == "__main__":
