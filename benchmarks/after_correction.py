@@ -26,6 +26,7 @@ import torch
 
 from lanrocli.envs import LanroEnv
 from lanrocli.envs.env import FALLEN
+from lanrocli.envs.evaluation import evaluation_settings
 from lanrocli.envs.tasks import REACH_STILL
 from lanrocli.train.trainer import AgentPolicy, load_policy
 
@@ -66,7 +67,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     settings, policy = load_policy(args.checkpoint)
-    env_settings = {**settings.env, "correction_rate": 1.0, "kinds": args.kinds, "random_start": 0.0}
+    env_settings = {**evaluation_settings(settings.env), "correction_rate": 1.0, "kinds": args.kinds}
     env = LanroEnv(settings.task, object_slots=settings.slots, **env_settings)
     outcomes = [run(env, policy, args.seed + i) for i in range(args.episodes)]
     env.close()

@@ -266,6 +266,7 @@ def _load_agent_policy(
     path: Path, task: TaskName | None, overrides: dict[str, object], device: str | None
 ) -> tuple[str, dict[str, object], int, object]:
     """Task, environment settings, object slots and deterministic policy of the agent saved at ``path``."""
+    from lanrocli.envs.evaluation import evaluation_settings
     from lanrocli.train import CheckpointError, pick_device
     from lanrocli.train.trainer import load_policy
 
@@ -277,7 +278,7 @@ def _load_agent_policy(
         raise fail(f"cannot load a trained agent from {path}: {error}") from None
     if task is not None and task.value != settings.task:
         raise fail(f"{path} was trained on {settings.task}; it cannot be evaluated on {task.value}")
-    env_settings = {**settings.env, "random_start": 0.0, **overrides}  # measured from the neutral pose
+    env_settings = {**evaluation_settings(settings.env), **overrides}
     if int(env_settings.get("objects", 2)) > settings.slots:  # type: ignore[call-overload]
         raise fail(f"{path} observes at most {settings.slots} objects; --objects must not exceed that")
     return settings.task, env_settings, settings.slots, policy

@@ -4,7 +4,7 @@ correction episodes, per kind of misunderstanding, and with or without negation.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -15,6 +15,12 @@ from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.policies import Policy
 
 GIF_EPISODES = 3
+
+
+def evaluation_settings(env: Mapping[str, Any]) -> dict[str, Any]:
+    """A stage's environment settings as evaluation uses them: every episode starts from the neutral pose
+    (random starts are for training), so success is comparable across runs and curricula."""
+    return {**env, "random_start": 0.0}
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:

@@ -173,20 +173,22 @@ class Panda:
         """
         width = float(np.clip(finger_width, 0.0, MAX_FINGER_WIDTH)) if self._gripper else 0.0
         self._finger_target = width / 2.0
-        self._teleport(NEUTRAL_ARM)
+        positions = self._teleport(NEUTRAL_ARM)
         if ee_position is not None:
             # One IK call moves a few centimetres accurately; from the neutral pose to a far corner takes
             # a handful, each starting where the last one left the arm.
             target = WORKSPACE.clip(ee_position).tolist()
             for _ in range(RESET_IK_ROUNDS):
-                self._teleport(self._ik.solve(target, self.state().joint_positions.tolist()).tolist())
-        self._command(self.state().joint_positions.tolist())
+                positions = self._teleport(self._ik.solve(target, positions).tolist())
+        self._command(positions)
 
-    def _teleport(self, arm: Sequence[float]) -> None:
+    def _teleport(self, arm: Sequence[float]) -> list[float]:
+        """Set the arm's joints (fingers at their target) at rest; returns every controlled joint's angle."""
         positions = [*arm, self._finger_target, self._finger_target]
         for joint, angle in zip(CONTROLLED_JOINTS, positions, strict=True):
             self._client.resetJointState(self.body_id, joint, angle, 0.0)
         self._world.invalidate()
+        return positions
 
     def clear_of(self, body_ids: Sequence[int], margin: float) -> bool:
         """Whether every part of the arm is at least ``margin`` (m) away from each body in ``body_ids``."""

@@ -21,7 +21,7 @@ import torch
 
 from lanrocli.agent import ObjectLayout, ReplayBuffer, SACAgent, SACSettings
 from lanrocli.envs import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
-from lanrocli.envs.evaluation import EvaluationReport, evaluate
+from lanrocli.envs.evaluation import EvaluationReport, evaluate, evaluation_settings
 from lanrocli.envs.tasks import make_task
 from lanrocli.language import grammar_vocabulary
 from lanrocli.train.checkpoint import (
@@ -165,10 +165,9 @@ class Trainer:
 
     def env_factory(self, evaluation: bool = False) -> Callable[[], LanroEnv]:
         """Builds environments of the current stage, observed through the run's object slots. A plain
-        partial, so that subprocesses receive the settings and not the trainer. Evaluation environments
-        start every episode from the neutral pose, so success is comparable across runs."""
+        partial, so that subprocesses receive the settings and not the trainer."""
         s = self.settings
-        env = {**s.env, "random_start": 0.0} if evaluation else s.env
+        env = evaluation_settings(s.env) if evaluation else s.env
         return functools.partial(LanroEnv, s.task, object_slots=s.slots, **env)
 
     def enter_stage(self, env: Mapping[str, Any], stage: int) -> None:
