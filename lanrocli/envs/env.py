@@ -62,8 +62,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
       x y z w (4), linear velocity (3), angular velocity (3), one-hot colour (9, in the order of
       ``lanrocli.language.COLOURS``), one-hot shape (3, ``cube cuboid cylinder``).
 
-    The displacement since reset is what makes the reward a function of the observation: reach fails once
-    any object was knocked more than 2.5 cm, and push succeeds once its object slid far enough, both
+    The displacement since reset is what makes the reward a function of the observation: reach on an object
+    fails once it was knocked more than 2.5 cm, and push succeeds once its object slid far enough, both
     measured from where the objects started. Without it, a knocked object at rest looks like an untouched
     one, and a random arm knocks one in about a fifth of its reach episodes, after which touching it earns
     -1 in states the critic cannot tell from those where it earns 0. The relative position is redundant but
