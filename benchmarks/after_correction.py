@@ -4,10 +4,13 @@ Runs a checkpoint's deterministic policy on correction episodes (from the neutra
 and sorts every episode in which the instructor spoke into:
 
 - *succeeded*: the arm then did the task on the goal object;
-- *knocked the goal* / *knocked another*: it failed, and that object ended up farther from its start than
-  reach allows (2.5 cm), which leaves a reach episode unsolvable; *fell*: an object went off the table;
-- *fell short*: it failed without disturbing anything; the closest the end effector came to the goal
-  object after the correction is reported (median), to tell "went elsewhere" from "stopped near".
+- *knocked the goal*: it failed, and the goal ended up farther from its start than reach allows (2.5 cm),
+  which leaves a reach episode unsolvable; *fell*: an object went off the table;
+- *fell short*: it failed without knocking the goal; the closest the end effector came to the goal object
+  after the correction is reported (median), to tell "went elsewhere" from "stopped near".
+
+It also says which object was knocked first (moved more than 2.5 cm), and whether before or after the
+correction: in reach, leaving a touched wrong object by dragging it is the typical first slip.
 
     python benchmarks/after_correction.py runs/learning-corrections --episodes 100
 
@@ -19,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -31,31 +35,44 @@ from lanrocli.envs.tasks import REACH_STILL
 from lanrocli.train.trainer import AgentPolicy, load_policy
 
 
-def run(env: LanroEnv, policy: AgentPolicy, seed: int) -> tuple[str, float] | None:
-    """The outcome of one episode after its correction, and the closest approach to the goal after it."""
+@dataclass(frozen=True)
+class Outcome:
+    """One episode with a spoken correction."""
+
+    result: str  # succeeded, knocked the goal, fell, fell short
+    closest: float  # closest approach of the end effector to the goal after the correction, m
+    first_knock: str | None  # e.g. "another object, after the correction"; None if nothing moved 2.5 cm
+
+
+def run(env: LanroEnv, policy: AgentPolicy, seed: int) -> Outcome | None:
     obs, info = env.reset(seed=seed)
     start = info["object_positions"]
+    goal = info["goal_index"]
     closest = np.inf
+    first_knock = None
     done = False
     while not done:
         obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
         done = terminated or truncated
-        if info["correction"] is not None:
-            hand = obs["observation"][:3]
-            closest = min(closest, float(np.linalg.norm(info["object_positions"][info["goal_index"]] - hand)))
+        spoken = info["correction"] is not None
+        positions = info["object_positions"]
+        if spoken:
+            closest = min(closest, float(np.linalg.norm(positions[goal] - obs["observation"][:3])))
+        moved = np.linalg.norm(positions - start, axis=1)
+        if first_knock is None and np.any(moved > REACH_STILL):
+            which = "the goal" if int(np.argmax(moved)) == goal else "another object"
+            first_knock = f"{which}, {'after' if spoken else 'before'} the correction"
     if info["correction"] is None:
         return None
     if terminated:
-        return "succeeded", closest
-    positions = info["object_positions"]
-    if np.any(positions[:, 2] < FALLEN):
-        return "fell", closest
-    knocked = np.linalg.norm(positions - start, axis=1) > REACH_STILL
-    if knocked[info["goal_index"]]:
-        return "knocked the goal", closest
-    if np.any(knocked):
-        return "knocked another", closest
-    return "fell short", closest
+        result = "succeeded"
+    elif np.any(info["object_positions"][:, 2] < FALLEN):
+        result = "fell"
+    elif np.linalg.norm(info["object_positions"][goal] - start[goal]) > REACH_STILL:
+        result = "knocked the goal"
+    else:
+        result = "fell short"
+    return Outcome(result, closest, first_knock)
 
 
 def main() -> None:
@@ -72,13 +89,17 @@ def main() -> None:
     outcomes = [run(env, policy, args.seed + i) for i in range(args.episodes)]
     env.close()
     spoken = [o for o in outcomes if o is not None]
-    counts = Counter(kind for kind, _ in spoken)
     print(f"{args.checkpoint}: {settings.task}, kinds {', '.join(args.kinds)}, seeds {args.seed}..")
     print(f"{args.episodes} episodes, a correction was spoken in {len(spoken)}")
-    for kind in ("succeeded", "knocked the goal", "knocked another", "fell", "fell short"):
-        near = [c for k, c in spoken if k == kind and np.isfinite(c)]
+    results = Counter(o.result for o in spoken)
+    for result in ("succeeded", "knocked the goal", "fell", "fell short"):
+        near = [o.closest for o in spoken if o.result == result and np.isfinite(o.closest)]
         median = f", closest approach to the goal after it: median {np.median(near) * 100:.1f} cm" if near else ""
-        print(f"  {kind:<16} {counts[kind]:>4}{median}")
+        print(f"  {result:<16} {results[result]:>4}{median}")
+    knocks = Counter(o.first_knock for o in spoken if o.result != "succeeded" and o.first_knock is not None)
+    print("first object knocked, in the failures:")
+    for knock, count in knocks.most_common():
+        print(f"  {knock:<36} {count:>4}")
 
 
 if __name__ == "__main__":
