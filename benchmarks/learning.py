@@ -22,6 +22,7 @@ from typing import Any
 import torch
 
 from lanrocli.agent import SACSettings
+from lanrocli.display import StopRequest
 from lanrocli.train import pick_device
 from lanrocli.train.curriculum import Curriculum
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
@@ -105,10 +106,15 @@ def main() -> None:
         run = CurriculumRun.resume(args.out, plan, device, Printer())
     else:
         run = CurriculumRun.start(plan, args.out, device, Printer())
-    try:
-        run.run()
-    finally:
-        run.close()
+    with StopRequest() as stop:
+        try:
+            finished = run.run(should_stop=stop.requested)
+        finally:
+            run.close()
+    if not finished:
+        print(f"stopped at {run.trainer.progress.env_steps} environment steps; checkpoint written. "
+              "Continue with the same arguments plus --resume.")
+        raise SystemExit(130)
     result = run.state.results[-1]
     if result.ended == "promoted":
         print(f"target reached at {result.end} environment steps, {result.wall_time:.0f} s")
