@@ -66,9 +66,9 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int) -> Outcome | None:
         return None
     if terminated:
         result = "succeeded"
-    elif np.any(info["object_positions"][:, 2] < FALLEN):
+    elif np.any(positions[:, 2] < FALLEN):
         result = "fell"
-    elif np.linalg.norm(info["object_positions"][goal] - start[goal]) > REACH_STILL:
+    elif moved[goal] > REACH_STILL:
         result = "knocked the goal"
     else:
         result = "fell short"
