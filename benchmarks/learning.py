@@ -5,10 +5,10 @@ environment steps to CSV; the second setting adds correction episodes (``correct
     python benchmarks/learning.py corrections --steps 1000000 --out runs/learning-corrections
 
 Each setting is a one-stage curriculum run by the same pipeline as ``lanro train``, so ``--out`` is a run
-folder: ``metrics.csv`` gets one row per evaluation (environment steps, wall time, success on fixed
-evaluation episodes with the deterministic policy, success on correction episodes, losses), ``lanro plot``
+folder: ``metrics.csv`` gets one row per evaluation (environment steps, wall time, success on fresh
+evaluation episodes with the deterministic policy, success where a correction was spoken, losses), ``lanro plot``
 draws it, and ``--resume`` continues it after a crash or kill. ``--target`` ends the run once the
-evaluation success (on correction episodes, for the second setting) reaches it. ``--random-start P``
+pooled evaluation success (where a correction was spoken, for the second setting) reaches it. ``--random-start P``
 starts that share of the training episodes with the hand at a random point near the table (evaluation
 always starts from the neutral pose).
 """
@@ -42,7 +42,7 @@ def curriculum(setting: str, steps: int, seed: int, envs: int, every: int, episo
     env = {**SETTINGS[setting], "random_start": random_start}
     stage: dict[str, Any] = {"name": setting, "env": env, "budget": {"steps": steps}}
     if target is not None:
-        stage["promote"] = {"success": target, "on": "corrections" if setting == "corrections" else "overall"}
+        stage["promote"] = {"success": target, "on": "corrected" if setting == "corrections" else "overall"}
     return Curriculum.model_validate(
         {
             "name": f"learning-{setting}",
@@ -70,7 +70,7 @@ def agent_overrides(pairs: list[str]) -> dict[str, str]:
 
 class Printer(RunObserver):
     def on_evaluation(self, run: CurriculumRun, row: dict[str, Any]) -> None:
-        extra = f", corrections {row['correction_success']:.2f}" if row["correction_success"] != "" else ""
+        extra = f", corrected {row['corrected_success']:.2f}" if row["corrected_success"] != "" else ""
         print(f"{row['env_steps']} steps, {row['wall_time']:.0f} s: success {row['success']:.2f}{extra}", flush=True)
 
 
@@ -82,7 +82,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--envs", type=int, default=2)
     parser.add_argument("--eval-every", type=int, default=10_000)
-    parser.add_argument("--eval-episodes", type=int, default=50)
+    parser.add_argument("--eval-episodes", type=int, default=100)
     parser.add_argument("--target", type=float, help="stop once evaluation success reaches this")
     parser.add_argument(
         "--random-start", type=float, default=0.0, metavar="P",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+import warnings
 from enum import Enum
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -17,8 +18,10 @@ from lanrocli import __version__
 from lanrocli.language import all_sentences, grammar_vocabulary, sample_sentence, sentence_stats
 
 if TYPE_CHECKING:
-    from lanrocli.envs.evaluation import EvaluationReport
+    from lanrocli.envs.evaluation import EvaluationReport, Instruction
     from lanrocli.train.curriculum import Curriculum
+    from lanrocli.train.testset import Measurement
+    from lanrocli.train.trainer import TrainSettings
 
 app = typer.Typer(
     name="lanro",
@@ -160,8 +163,14 @@ def _print_report(report: EvaluationReport, title: str) -> None:
     table = Table(title=title)
     for column in ("episodes", "", "success", "95% CI"):
         table.add_column(column, justify="right" if column != "" else "left")
-    rows = [("all episodes", report.overall), ("correction episodes", report.corrections)]
-    rows += [(f"  {kind}", rate) for kind, rate in report.by_kind().items()]
+    rows = [
+        ("all episodes", report.overall),
+        ("correction episodes", report.correction_episodes),
+        ("a correction was spoken (corrected)", report.corrected),
+    ]
+    corrected = report.corrected_by_kind()
+    for kind, rate in report.by_kind().items():
+        rows += [(f"  {kind}", rate), (f"    {kind}, correction spoken", corrected[kind])]
     rows += [(f"  correction spoken, {name.replace('_', ' ')}", rate) for name, rate in report.by_negation().items()]
     for name, rate in rows:
         low, high = rate.interval
@@ -186,6 +195,12 @@ def _env_summary(env: dict[str, object]) -> str:
     if env.get("random_start"):
         parts.append(f"random starts {env['random_start']:g}")
     return ", ".join(parts)
+
+
+class InstructionName(str, Enum):
+    true = "true"
+    blank = "blank"
+    other = "other"
 
 
 @app.command("eval")
@@ -215,16 +230,34 @@ def evaluate_command(
         str | None,
         typer.Option(help="Comma-separated kinds: ambiguity,common_ground,instruction_correction,wrong_object."),
     ] = None,
-    episodes: Annotated[int, typer.Option(min=1, help="Number of episodes.")] = 100,
-    seed: Annotated[int, typer.Option(min=0, help="Episode i uses seed SEED + i.")] = 0,
+    episodes: Annotated[
+        int | None,
+        typer.Option(min=1, help="Number of episodes (default: a checkpoint's test.episodes, else 100)."),
+    ] = None,
+    seed: Annotated[
+        int | None,
+        typer.Option(
+            min=0,
+            help="Episode i uses seed SEED + i. Default: a checkpoint's held-out test episodes (the ones report.md "
+            "quotes), 0 for a scripted policy.",
+        ),
+    ] = None,
+    instruction: Annotated[
+        InstructionName,
+        typer.Option(
+            help="The sentence the agent reads: the instructor's (true), none (blank), or one naming another "
+            "object on the table (other; success is the task on that object).",
+        ),
+    ] = InstructionName.true,
     device: Annotated[str | None, typer.Option(help="cpu or cuda for a trained agent (default: cuda if available).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
     gif: Annotated[Path | None, typer.Option(help="Write the first episodes as an animated GIF here.")] = None,
 ) -> None:
-    """Evaluate a scripted policy or a trained agent: success overall, on correction episodes, per kind, with 95%
-    intervals. For a checkpoint, the environment defaults to the stage it was trained on; options change it."""
+    """Evaluate a scripted policy or a trained agent: success overall, on correction episodes, where a correction
+    was spoken, per kind, with 95% intervals. For a checkpoint, the environment defaults to the stage it was
+    trained on and the episodes to that stage's held-out test episodes; options change them."""
     from lanrocli.envs import LanroEnv
-    from lanrocli.envs.evaluation import evaluate
+    from lanrocli.envs.evaluation import Instruction, evaluate
     from lanrocli.envs.policies import make_policy
 
     given = {
@@ -237,51 +270,85 @@ def evaluate_command(
         "kinds": None if kinds is None else [k.strip() for k in kinds.split(",") if k.strip()],
     }
     overrides = {k: v for k, v in given.items() if v is not None}
+    shown = Instruction(instruction.value)
     if what in {p.value for p in PolicyName}:
+        if shown is not Instruction.TRUE:
+            raise fail("--instruction changes what a trained agent reads; scripted policies read no sentence")
         task_name = (task or TaskName.reach).value
         env_settings = {"objects": 2, "mode": "color", "correction_rate": 0.0, **overrides}
-        slots, label = None, what
-        policy = make_policy(what, task_name)
+        first = 0 if seed is None else seed
+        try:
+            env = LanroEnv(task=task_name, render_mode="rgb_array" if gif else None, **env_settings)
+        except ValueError as error:
+            raise fail(f"{error} (see 'lanro eval --help')") from None
+        try:
+            report = evaluate(env, make_policy(what, task_name), episodes or 100, first, gif)
+        finally:
+            env.close()
+        record = {"policy": what, "task": task_name, "env": env_settings, **report.as_dict()}
+        where = f"seed {first}"
     else:
-        task_name, env_settings, slots, policy = _load_agent_policy(Path(what), task, overrides, device)
-        label = what
-    try:
-        env = LanroEnv(task=task_name, object_slots=slots, render_mode="rgb_array" if gif else None, **env_settings)
-    except ValueError as error:
-        raise fail(f"{error} (see 'lanro eval --help')") from None
-    try:
-        report = evaluate(env, policy, episodes, seed, gif)
-    finally:
-        env.close()
+        measurement = _measure_checkpoint(Path(what), task, overrides, episodes, seed, shown, device, gif)
+        report, record, task_name, env_settings = (
+            measurement.report, measurement.record, measurement.settings.task, measurement.env
+        )
+        where = "held-out test episodes" if measurement.held_out else f"seed {measurement.first_seed}"
+        if shown is not Instruction.TRUE:
+            where += f", instruction {shown.value}"
     if as_json:
-        typer.echo(json.dumps({"policy": label, "task": task_name, "env": env_settings, **report.as_dict()}))
+        typer.echo(json.dumps(record))
         return
     summary = _env_summary({"mode": "color", "correction_rate": 0.0, **env_settings})
-    _print_report(report, f"{label} on {task_name}, {summary}, seed {seed}")
+    _print_report(report, f"{what} on {task_name}, {summary}, {where}")
     if gif:
         Console().print(f"wrote {gif}")
 
 
-def _load_agent_policy(
-    path: Path, task: TaskName | None, overrides: dict[str, object], device: str | None
-) -> tuple[str, dict[str, object], int, object]:
-    """Task, environment settings, object slots and deterministic policy of the agent saved at ``path``."""
-    from lanrocli.envs.evaluation import evaluation_settings
+def _measure_checkpoint(
+    path: Path,
+    task: TaskName | None,
+    overrides: dict[str, object],
+    episodes: int | None,
+    seed: int | None,
+    shown: Instruction,
+    device: str | None,
+    gif: Path | None,
+) -> Measurement:
+    """The trained agent at ``path`` measured as ``lanro eval`` was asked; every problem is a clear error."""
     from lanrocli.train import CheckpointError, pick_device
-    from lanrocli.train.trainer import load_policy
+    from lanrocli.train.testset import measure
 
     if not path.exists():
         raise fail(f"{path} is neither a scripted policy (oracle, mistaken, random) nor an existing checkpoint path")
+
+    def check(settings: TrainSettings, env_settings: dict[str, object]) -> None:
+        if task is not None and task.value != settings.task:
+            raise fail(f"{path} was trained on {settings.task}; it cannot be evaluated on {task.value}")
+        if int(env_settings.get("objects", 2)) > settings.slots:  # type: ignore[call-overload]
+            raise fail(f"{path} observes at most {settings.slots} objects; --objects must not exceed that")
+
     try:
-        settings, policy = load_policy(path, pick_device(device))
-    except (CheckpointError, ValueError, KeyError) as error:
+        torch_device = pick_device(device)
+        count = episodes or _test_episodes(path)
+        return measure(path, count, torch_device, overrides, seed, shown, gif, check=check)
+    except (CheckpointError, KeyError) as error:
         raise fail(f"cannot load a trained agent from {path}: {error}") from None
-    if task is not None and task.value != settings.task:
-        raise fail(f"{path} was trained on {settings.task}; it cannot be evaluated on {task.value}")
-    env_settings = {**evaluation_settings(settings.env), **overrides}
-    if int(env_settings.get("objects", 2)) > settings.slots:  # type: ignore[call-overload]
-        raise fail(f"{path} observes at most {settings.slots} objects; --objects must not exceed that")
-    return settings.task, env_settings, settings.slots, policy
+    except ValueError as error:
+        raise fail(f"{error} (see 'lanro eval --help')") from None
+
+
+def _test_episodes(path: Path) -> int:
+    """The test-set size of the run that ``path`` belongs to, so ``lanro eval`` repeats what report.md quotes."""
+    from lanrocli.train.checkpoint import resolve_checkpoint
+    from lanrocli.train.curriculum import Curriculum, CurriculumError, HeldOutConfig, load_curriculum
+    from lanrocli.train.pipeline import CONFIG
+
+    config = resolve_checkpoint(path).parent.parent / CONFIG
+    try:
+        plan: Curriculum = load_curriculum(config)
+        return plan.test.episodes
+    except CurriculumError:
+        return HeldOutConfig().episodes
 
 
 @app.command("check")
@@ -299,7 +366,11 @@ def _load_plan(path: Path | None, quick: bool, seed: int | None, envs: int | Non
     from lanrocli.train.curriculum import CurriculumError, builtin_curriculum, load_curriculum
 
     try:
-        plan = load_curriculum(path) if path is not None else builtin_curriculum()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", FutureWarning)
+            plan = load_curriculum(path) if path is not None else builtin_curriculum()
+        for warning in caught:
+            err_console.print(f"[bold yellow]warning:[/] {path}: {warning.message}")
     except CurriculumError as error:
         count = len(error.problems)
         raise fail(f"{count} problem{'s' if count > 1 else ''} in the curriculum:\n{error}") from None
@@ -318,7 +389,9 @@ def _print_plan(plan: Curriculum) -> None:
     for i, stage in enumerate(plan.stages):
         rule = "-"
         if stage.promote is not None:
-            rule = f"{stage.promote.on} success >= {stage.promote.success:g} on {stage.promote.patience} evaluation(s)"
+            p = stage.promote
+            measure = "success" if p.statistic == "mean" else "lower end of the 95% interval of success"
+            rule = f"{p.on} {measure} >= {p.success:g} on the episodes of {p.patience} evaluation(s) pooled"
         table.add_row(
             f"{i + 1}. {stage.name}",
             _env_summary(stage.env.model_dump()),
@@ -329,7 +402,10 @@ def _print_plan(plan: Curriculum) -> None:
     console.print(table)
     changed = {k: v for k, v in plan.agent.settings().to_dict().items() if SACSettings().to_dict()[k] != v}
     console.print(f"at most {plan.total_steps:,} environment steps in all")
-    console.print(f"evaluation: {plan.eval.episodes} episodes every {plan.eval.every:,} steps of a stage, and at its end")
+    console.print(
+        f"evaluation: {plan.eval.episodes} fresh episodes every {plan.eval.every:,} steps of a stage, and at its end; "
+        f"test: {plan.test.episodes} held-out episodes for each stage's last and best agents"
+    )
     console.print(f"agent: default settings (SACSettings){', except ' + str(changed) if changed else ''}")
 
 
@@ -378,6 +454,10 @@ def train_command(
     except (RunError, CurriculumError) as error:
         raise fail(str(error)) from None
     if run.state.finished:
+        try:
+            run.complete_tests()  # a run stopped while testing its last stage
+        finally:
+            run.close()
         Console().print(f"the run in {out} has finished already; see {out / 'report.md'}")
         return
     resume_hint = "lanro train " + (f"{curriculum} " if curriculum else "") + ("--quick " if quick else "") + f"--out {out} --resume"

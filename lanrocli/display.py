@@ -113,7 +113,10 @@ class TrainingDisplay(RunObserver):
             )
 
     def on_evaluation(self, run: CurriculumRun, row: dict[str, Any]) -> None:
-        self._last_eval = f"evaluation: success {_rate(row['success'])}, corrections {_rate(row['correction_success'])}"
+        self._last_eval = (
+            f"evaluation: success {_rate(row['success'])}, corrected {_rate(row['corrected_success'])}"
+            f" of {row['corrected_episodes']}"
+        )
         line = escape(f"[{row['stage_name']}] step {row['env_steps']:,}: {self._last_eval}")
         if self._progress is not None:
             self._progress.console.print(line)

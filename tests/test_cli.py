@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
+import pytest
+import torch
 from typer.testing import CliRunner
 
 from lanrocli import __version__
@@ -109,6 +112,8 @@ def test_eval_table_and_bad_values() -> None:
     assert bad.exit_code == 2
     bad = runner.invoke(app, ["eval", "telepath"])
     assert bad.exit_code == 2
+    bad = runner.invoke(app, ["eval", "oracle", "--instruction", "blank"])
+    assert bad.exit_code == 2 and "scripted policies read no sentence" in bad.output
 
 
 def test_eval_writes_a_gif(tmp_path) -> None:
@@ -126,12 +131,24 @@ def test_quick_training_run_then_eval_plot_and_refusals(tmp_path) -> None:
         assert (out / name).is_file()
     for stage in ("stage-1-single", "stage-2-corrections", "stage-3-negations"):
         assert (out / stage / "best").is_file() and (out / stage / "last").is_file()
-    assert "Status: finished" in (out / "report.md").read_text()
+    report_text = (out / "report.md").read_text()
+    assert "Status: finished" in report_text
 
-    evaluated = runner.invoke(app, ["eval", str(out), "--episodes", "3", "--json"])
+    assert "## Test: held-out episodes" in report_text and "## Language check" in report_text
+    tested = json.loads((out / "stage-3-negations" / "test.json").read_text())
+    assert set(tested) == {"last", "best", "language"} and set(tested["language"]) == {"true", "blank", "other"}
+
+    evaluated = runner.invoke(app, ["eval", str(out), "--json"])
     assert evaluated.exit_code == 0, evaluated.output
     report = json.loads(evaluated.output)
-    assert report["episodes"] == 3 and report["env"]["objects"] == 3 and report["env"]["negations"] is True
+    # By default a checkpoint meets its stage's test episodes, so its numbers are report.md's.
+    assert report == tested["last"]
+    assert report["env"]["objects"] == 3 and report["env"]["negations"] is True
+    assert set(report["corrected"]) == {"episodes", "success", "ci"}
+    others = json.loads(runner.invoke(app, ["eval", str(out), "--episodes", "3", "--seed", "5", "--json"]).output)
+    assert others["episodes"] == 3 and others["episodes_from"] == {"test_set": False, "first_seed": 5}
+    blank = runner.invoke(app, ["eval", str(out), "--instruction", "blank", "--correction-rate", "0", "--json"])
+    assert json.loads(blank.output) == tested["language"]["blank"]
     best = runner.invoke(app, ["eval", str(out / "stage-1-single" / "best"), "--episodes", "2"])
     assert best.exit_code == 0 and "2 objects, color" in best.output
     assert runner.invoke(app, ["eval", str(out), "--task", "push"]).exit_code == 2
@@ -172,3 +189,38 @@ def test_check_reports_every_problem_with_its_place_and_exits_2(tmp_path) -> Non
     assert f"{path}:9: stages[1].budget.steps" in result.output
     missing = runner.invoke(app, ["train"])
     assert missing.exit_code == 2 and "--quick" in missing.output
+
+
+UNSERVED_DEVICES = [
+    "tpu",
+    "meta",
+    *(["cuda"] if not torch.cuda.is_available() else []),
+    *(["cuda:7"] if torch.cuda.device_count() <= 7 else []),
+]
+"""--device values this machine cannot serve: unknown names, other device types, CUDA it lacks."""
+
+
+@pytest.fixture(scope="module")
+def untrained_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A checkpoint that loads: a device problem is then the only thing wrong with an eval."""
+    from lanrocli.agent import SACSettings
+    from lanrocli.train import Trainer, TrainSettings
+
+    trainer = Trainer(TrainSettings(task="reach"), SACSettings(hidden_size=16, obs_size=16, buffer_size=10))
+    return trainer.save(tmp_path_factory.mktemp("run") / "checkpoint", resumable=False)
+
+
+@pytest.mark.parametrize("device", UNSERVED_DEVICES)
+def test_eval_on_a_device_this_machine_cannot_serve_is_a_clear_error(untrained_checkpoint: Path, device: str) -> None:
+    result = runner.invoke(app, ["eval", str(untrained_checkpoint), "--episodes", "1", "--device", device])
+    assert result.exit_code == 2, result.output
+    assert "error:" in result.output and device in result.output and "Traceback" not in result.output
+
+
+@pytest.mark.parametrize("device", UNSERVED_DEVICES)
+def test_train_on_a_device_this_machine_cannot_serve_is_a_clear_error(tmp_path: Path, device: str) -> None:
+    out = tmp_path / "run"
+    result = runner.invoke(app, ["train", "--quick", "--out", str(out), "--device", device])
+    assert result.exit_code == 2, result.output
+    assert "error:" in result.output and device in result.output and "Traceback" not in result.output
+    assert not out.exists(), "the device is checked before the run folder is made"

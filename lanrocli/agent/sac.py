@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import logging
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -19,6 +20,8 @@ from lanrocli.agent.networks import Actor, Critic, LanguageEncoder, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
 
 _FORMAT = 1
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -129,7 +132,8 @@ class SACAgent:
     Everything random in it (initial weights, exploration and target-policy noise) derives from ``seed``:
     the weights are drawn inside a forked torch RNG, so building an agent leaves torch's global generator
     untouched, and the noise comes from the agent's own generator, whose state is part of
-    :meth:`state_dict`, so a resumed run continues the same stream.
+    :meth:`state_dict`, so a resumed run continues the same stream. A saved state moves between CPU and
+    CUDA too, except for that stream, which is specific to its device type (see :meth:`load_state_dict`).
     """
 
     def __init__(
@@ -152,6 +156,7 @@ class SACAgent:
         self.action_dim = action_dim
         self.vocab_size = vocab_size
         self.device = torch.device(device)
+        self.seed = seed
         weight_seed, noise_seed = (int(x) for x in np.random.SeedSequence(seed).generate_state(2))
 
         with torch.random.fork_rng(devices=[]):
@@ -166,7 +171,9 @@ class SACAgent:
                 obs_dim, action_dim, critic_encoder, s.obs_size, s.hidden_size, s.hidden_layers, s.critics, self.layout
             ).to(self.device)
         self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
-        self.normalizer = RunningNormalizer(obs_dim, s.obs_clip, s.obs_var_eps).to(self.device)
+        # The layout serves the normaliser whatever the architecture: objects share statistics across slots.
+        observed = layout if layout is not None else ObjectLayout(obs_dim, 0, 0)
+        self.normalizer = RunningNormalizer(observed, s.obs_clip, s.obs_var_eps).to(self.device)
         self.log_alpha = torch.tensor(math.log(s.alpha), device=self.device, requires_grad=s.autotune_alpha)
         self.target_entropy = s.target_entropy if s.target_entropy is not None else -float(action_dim)
 
@@ -347,7 +354,9 @@ class SACAgent:
             "normalizer": self.normalizer.state_dict(),
             "log_alpha": self.log_alpha.detach().clone(),
             "optimizer": self.optimizer.state_dict(),
+            "seed": self.seed,
             "generator": self.generator.get_state(),
+            "generator_device": self.device.type,
             "updates": self.updates,
         }
 
@@ -356,6 +365,12 @@ class SACAgent:
 
         The other settings (learning rates, gamma, relabelling, ...) stay this agent's, so a run may change
         them between stages and still continue from the saved weights and optimiser moments.
+
+        Tensors land on this agent's device whichever device saved them. The noise generator's state does
+        not travel: a CPU generator keeps a Mersenne Twister, a CUDA one a seed and an offset, and neither
+        can continue the other's stream. An agent loaded on another device type than the one that saved it
+        therefore starts a new stream, seeded from its seed and update count so that the same checkpoint
+        loaded the same way gives the same numbers, and logs a warning saying so.
         """
         if state["format"] != _FORMAT:
             raise ValueError(f"agent state format {state['format']} is not {_FORMAT}")
@@ -381,16 +396,37 @@ class SACAgent:
         self.optimizer.load_state_dict(state["optimizer"])
         for group, lr in zip(self.optimizer.param_groups, self._learning_rates()):
             group["lr"] = lr
-        self.generator.set_state(state["generator"].cpu())
         self.updates = int(state["updates"])
+        self._restore_generator(state)
+
+    def _restore_generator(self, state: Mapping[str, Any]) -> None:
+        """Continue the saved noise stream on the device type that saved it, else start a derived one."""
+        saved = state["generator"].cpu()
+        saved_on = state.get("generator_device")
+        if saved_on is None:  # written before the device type was recorded: the state's size tells
+            same_kind = saved.numel() == self.generator.get_state().numel()
+        else:
+            same_kind = saved_on == self.device.type
+        if same_kind:
+            self.generator.set_state(saved)
+            return
+        seed = int(np.random.SeedSequence([self.seed, self.updates]).generate_state(1)[0])
+        self.generator.manual_seed(seed)
+        logger.warning(
+            "the agent's exploration noise was saved on %s and cannot continue on %s; it restarts from a stream "
+            "derived from the agent's seed (%d) and update count (%d)",
+            saved_on or "another device type", self.device.type, self.seed, self.updates,
+        )
 
     @classmethod
     def from_state_dict(cls, state: Mapping[str, Any], device: str | torch.device = "cpu") -> SACAgent:
-        """An agent rebuilt from its saved dimensions and settings, then loaded."""
+        """An agent rebuilt from its saved dimensions, settings and seed (0 for a state saved before the seed
+        was), then loaded."""
         agent = cls(
             state["obs_dim"], state["action_dim"], state["vocab_size"], SACSettings.from_dict(state["settings"]),
+            seed=int(state.get("seed", 0)),
             device=device,
-            layout=None if state.get("layout") is None else ObjectLayout(**state["layout"]),
+            layout=RunningNormalizer.saved_layout(state["normalizer"]),
         )
         agent.load_state_dict(state)
         return agent

@@ -62,12 +62,17 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
       x y z w (4), linear velocity (3), angular velocity (3), one-hot colour (9, in the order of
       ``lanrocli.language.COLOURS``), one-hot shape (3, ``cube cuboid cylinder``).
 
-    The displacement since reset is what makes the reward a function of the observation: reach on an object
-    fails once it was knocked more than 2.5 cm, and push succeeds once its object slid far enough, both
-    measured from where the objects started. Without it, a knocked object at rest looks like an untouched
-    one, and a random arm knocks one in about a fifth of its reach episodes, after which touching it earns
-    -1 in states the critic cannot tell from those where it earns 0. The relative position is redundant but
-    not idle: what every task needs first is the offset from the hand to the named object.
+    The displacement since reset is what lets the observation tell how far an object has moved: reach on an
+    object fails once it was knocked more than 2.5 cm, and push succeeds once its object slid far enough,
+    both measured from where the objects started. Without it, a knocked object at rest looks like an
+    untouched one, and a random arm knocks one in about a fifth of its reach episodes, after which touching
+    it earns -1 in states the critic cannot tell from those where it earns 0. The relative position is
+    redundant but not idle: what every task needs first is the offset from the hand to the named object.
+
+    How far push must slide its object and how high lift must raise it are drawn per episode
+    (``lanrocli.envs.tasks``) and are not observed: the instruction names no distance, so the agent is not
+    told them and has to learn to go past the largest distance or height an episode may draw. For push and
+    lift the reward is therefore not a function of the observation alone.
 
     Episodes start with the end effector at (0, 0, 0.10); ``random_start`` is the share that starts at a
     random point of the workspace near the table instead, clear of the objects (for training).
@@ -172,6 +177,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self._area_high,
             self._spacing,
             need_shared=challenge is Kind.AMBIGUITY,
+            need_same_shape=challenge is Kind.COMMON_GROUND,
         )
         self._scene = scene
         self.task.reset(rng)

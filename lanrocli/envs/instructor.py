@@ -100,6 +100,17 @@ def _matching(phrase: Phrase, objects: Sequence[ObjectProps]) -> set[int]:
     return {i for i, o in enumerate(objects) if phrase.matches(o)}
 
 
+def _needs_colour(phrase: Phrase, others: Sequence[ObjectProps]) -> bool:
+    """Whether a listener who skips the phrase's colour word could still pick one of ``others``.
+
+    A common-ground instruction tests the rare colour word only if the rest of it leaves a choice: "the
+    azure brick" beside no other brick is understood from "brick" alone. The scene of such an episode is
+    drawn with another object of the goal's shape (:func:`~lanrocli.envs.scene.sample_objects`), so some
+    rare phrase always passes this test.
+    """
+    return any(phrase.shape is None or o.shape == phrase.shape for o in others)
+
+
 @dataclass
 class Instructor:
     """One episode's dialogue. ``start`` plans it; ``observe`` is called after every step."""
@@ -135,14 +146,15 @@ class Instructor:
         if challenge is Kind.AMBIGUITY:
             phrases = ambiguous_phrases(goal, others)
         elif challenge is Kind.COMMON_GROUND:
-            phrases = [p for p in identifying_phrases(goal, others, rare=True) if p.rare]
+            phrases = [p for p in identifying_phrases(goal, others, rare=True) if p.rare and _needs_colour(p, others)]
         elif challenge is Kind.INSTRUCTION_CORRECTION:
             named = pick(rng, [i for i in range(len(scene.objects)) if i != scene.goal_index])
             phrases = identifying_phrases(scene.objects[named], scene.others(named))
         else:
             phrases = identifying_phrases(goal, others)
         if not phrases:
-            raise RuntimeError(f"no {challenge or 'plain'} instruction exists for goal {goal} among {others}")
+            name = challenge.value if challenge else "plain"
+            raise RuntimeError(f"no {name} instruction exists for goal {goal} among {others}")
         self._phrase = pick(rng, phrases)
         self.instruction_text = instruction(pick(rng, TASK_VERBS[self.task]), self._phrase)
 

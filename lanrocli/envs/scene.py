@@ -50,24 +50,40 @@ class Scene:
 
 
 def sample_objects(
-    rng: np.random.Generator, mode: Mode, n_objects: int, need_shared: bool = False
+    rng: np.random.Generator, mode: Mode, n_objects: int, need_shared: bool = False, need_same_shape: bool = False
 ) -> tuple[tuple[ObjectProps, ...], int]:
     """Distinct objects in observation order and the goal's index, obeying the at-most-one-shared-property rule.
 
     ``need_shared`` asks for at least one non-goal object that shares a property with the goal, which an
     ambiguous instruction needs. It is always possible: in every mode some object shares exactly one
     property with any goal.
+
+    ``need_same_shape`` asks for at least one non-goal object of the goal's shape (and so, by the rule,
+    of another colour), which a common-ground instruction needs: "the azure brick" tests whether the
+    agent has learnt the rare word only if "the brick" alone would leave a choice. The other rare form,
+    "the azure object", names no shape and leaves every object a candidate without the colour word. In
+    ``color`` mode every object is a cube, so any scene qualifies; in the other modes the goal's shape
+    comes in at least three colours, so such an object always exists. Each request is met by swapping
+    one drawn object for a qualifying one: two more draws from ``rng`` at most, so the draw stays cheap
+    and episodes stay a function of the seed.
     """
     catalogue = mode_catalogue(mode)
     goal = catalogue[int(rng.integers(len(catalogue)))]
     allowed = [o for o in catalogue if o.shared_properties(goal) <= 1]
     others = [allowed[i] for i in rng.choice(len(allowed), size=n_objects - 1, replace=False)]
     if need_shared and not any(o.shared_properties(goal) == 1 for o in others):
-        shared = [o for o in allowed if o.shared_properties(goal) == 1 and o not in others]
-        others[int(rng.integers(len(others)))] = shared[int(rng.integers(len(shared)))]
+        _swap_in(rng, others, [o for o in allowed if o.shared_properties(goal) == 1])
+    if need_same_shape and not any(o.shape == goal.shape for o in others):
+        _swap_in(rng, others, [o for o in allowed if o.shape == goal.shape])
     goal_index = int(rng.integers(n_objects))
     objects = others[:goal_index] + [goal] + others[goal_index:]
     return tuple(objects), goal_index
+
+
+def _swap_in(rng: np.random.Generator, others: list[ObjectProps], qualifying: list[ObjectProps]) -> None:
+    """Replace a random one of ``others`` by a random qualifying object not among them yet (in place)."""
+    fresh = [o for o in qualifying if o not in others]
+    others[int(rng.integers(len(others)))] = fresh[int(rng.integers(len(fresh)))]
 
 
 def sample_positions(
@@ -90,7 +106,8 @@ def sample_scene(
     area_high: np.ndarray,
     min_distance: float,
     need_shared: bool = False,
+    need_same_shape: bool = False,
 ) -> Scene:
-    objects, goal_index = sample_objects(rng, mode, n_objects, need_shared)
+    objects, goal_index = sample_objects(rng, mode, n_objects, need_shared, need_same_shape)
     positions = sample_positions(rng, n_objects, area_low, area_high, min_distance)
     return Scene(objects, goal_index, positions)

@@ -18,6 +18,7 @@ import dataclasses
 import difflib
 import re
 import typing
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, NamedTuple
@@ -37,6 +38,7 @@ from pydantic_core import ErrorDetails
 
 from lanrocli.agent import SACSettings
 from lanrocli.envs.instructor import InstructorSettings, Kind
+from lanrocli.train.seeds import FIELD
 
 KindName = Literal["ambiguity", "common_ground", "instruction_correction", "wrong_object"]
 TaskName = Literal["reach", "push", "grasp", "lift"]
@@ -44,6 +46,9 @@ NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
 """Curriculum and stage names become folder names: no separators, no leading dot."""
 
 KeyPath = tuple[str | int, ...]
+
+QUICK_TEST_EPISODES = 40
+"""Test episodes per agent and stage under ``--quick``: enough to see the pipeline work, in seconds."""
 
 
 @dataclass(frozen=True)
@@ -123,15 +128,32 @@ class Budget(BaseModel):
 
 
 class Promote(BaseModel):
-    """When the agent has mastered a stage: evaluation success at least ``success`` on ``patience``
-    consecutive evaluations, so one lucky evaluation does not end a stage."""
+    """When the agent has mastered a stage: the success rate on the episodes of its last ``patience``
+    evaluations, pooled, is at least ``success``. Pooling judges a rule on patience x episodes fresh episodes
+    at once, so one lucky evaluation neither ends a stage nor, with ``statistic: lower_bound``, does a
+    rate that the pooled episodes cannot tell apart from a lower one."""
 
     model_config = ConfigDict(extra="forbid")
 
     success: float = Field(ge=0.0, le=1.0)
-    on: Literal["overall", "corrections"] = "overall"
-    """``corrections``: the success rate of episodes in which the instructor corrected the agent."""
+    on: Literal["overall", "corrected"] = "overall"
+    """``corrected``: the success rate of episodes in which the instructor spoke a correction."""
     patience: int = Field(1, ge=1)
+    statistic: Literal["mean", "lower_bound"] = "mean"
+    """``mean``: the pooled success rate; ``lower_bound``: the lower end of its 95% Wilson interval."""
+
+    @field_validator("on", mode="before")
+    @classmethod
+    def _renamed(cls, on: Any) -> Any:
+        if on == "corrections":
+            warnings.warn(
+                "promote.on: 'corrections' is deprecated and read as 'corrected' (the success of episodes in which "
+                "a correction was spoken); write 'on: corrected'",
+                FutureWarning,
+                stacklevel=2,
+            )
+            return "corrected"
+        return on
 
 
 class Stage(BaseModel):
@@ -149,20 +171,30 @@ class Stage(BaseModel):
     @classmethod
     def _corrections_exist(cls, promote: Promote | None, info: ValidationInfo) -> Promote | None:
         env = info.data.get("env")  # absent when the env itself failed validation
-        if promote is not None and promote.on == "corrections" and env is not None and env.correction_rate == 0:
+        if promote is not None and promote.on == "corrected" and env is not None and env.correction_rate == 0:
             raise ValueError(
-                "promote on 'corrections' needs env.correction_rate > 0: without corrections there is no "
+                "promote on 'corrected' needs env.correction_rate > 0: without corrections there is no "
                 "success rate on corrections to measure"
             )
         return promote
 
 
 class EvalConfig(BaseModel):
+    """Evaluations during a stage: they drive promotion and pick ``best``, each on fresh episodes."""
+
     model_config = ConfigDict(extra="forbid")
 
     every: int = Field(10_000, gt=0)
     """Environment steps between evaluations."""
-    episodes: int = Field(50, gt=0)
+    episodes: int = Field(100, gt=0)
+
+
+class HeldOutConfig(BaseModel):
+    """The held-out test episodes on which each stage's ``last`` and ``best`` agents are measured."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    episodes: int = Field(500, gt=0)
 
 
 class _AgentBase(BaseModel):
@@ -197,13 +229,14 @@ class Curriculum(BaseModel):
 
     name: str = Field(pattern=NAME_PATTERN)
     task: TaskName
-    seed: int = Field(0, ge=0)
+    seed: int = Field(0, ge=0, lt=FIELD)
     envs: int = Field(2, ge=1, le=64)
     """Parallel environments collecting experience."""
     learning_starts: int = Field(1000, ge=0)
     """Environment steps collected, by the untrained policy, before the first update."""
     agent: AgentConfig = Field(default_factory=AgentConfig)
     eval: EvalConfig = Field(default_factory=EvalConfig)
+    test: HeldOutConfig = Field(default_factory=HeldOutConfig)
     stages: list[Stage]
 
     @field_validator("stages")
@@ -242,6 +275,7 @@ class Curriculum(BaseModel):
             stage["budget"]["steps"] = min(stage["budget"]["steps"], 1500)
         data["eval"]["every"] = min(data["eval"]["every"], 500)
         data["eval"]["episodes"] = min(data["eval"]["episodes"], 5)
+        data["test"]["episodes"] = min(data["test"]["episodes"], QUICK_TEST_EPISODES)
         data["learning_starts"] = min(data["learning_starts"], 256)
         data["agent"]["buffer_size"] = min(data["agent"]["buffer_size"], 100_000)
         return _validate(data, {}, "<quick>")
@@ -274,7 +308,7 @@ stages:
   - name: corrections
     env: {objects: 2, mode: color, correction_rate: 0.5, max_delay: 5}
     budget: {steps: 1500}
-    promote: {success: 0.7, on: corrections}
+    promote: {success: 0.7, on: corrected}
   - name: negations
     env: {objects: 3, mode: color_shape, correction_rate: 0.5, negations: true, max_delay: 5}
     budget: {steps: 1500}

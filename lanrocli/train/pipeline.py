@@ -11,20 +11,26 @@ The run folder holds everything a researcher looks at or resumes from::
     stage-K-NAME/last, best      pointers to those two
     events.*                     TensorBoard scalars, when the tensorboard package is installed
 
+    stage-K-NAME/test.json       the stage's last and best agents on its held-out test episodes
+
 Within a stage, evaluation happens every ``eval.every`` environment steps counted from the stage's start
-and when its budget is spent. After each evaluation the stage's promotion rule is checked (the success
-rate on all episodes or on correction episodes, at least ``success`` on ``patience`` evaluations in a
-row); the stage ends when it holds or when the budget is spent, and then the next stage begins with the
-same agent and replay buffer, or, for ``on_budget: stop``, the run ends. A checkpoint follows every
-evaluation and every interruption, so a resumed run repeats nothing and skips nothing: it ends with the
-same stages, step counts and, on CPU, the same numbers as a run that was never stopped.
+and when its budget is spent, each time on fresh episodes. After each evaluation the stage's promotion
+rule is checked on the episodes of its last ``patience`` evaluations pooled (their success rate, or the
+lower end of its 95% interval); the stage ends when it holds or when the budget is spent, and then the
+next stage begins with the same agent and replay buffer, or, for ``on_budget: stop``, the run ends. When a
+stage ends, its ``last`` and ``best`` agents are measured on the stage's test episodes, which nothing in
+the run selects on; ``report.md`` quotes those figures. A checkpoint follows every evaluation and every
+interruption, so a resumed run repeats nothing and skips nothing: it ends with the same stages, step
+counts and, on CPU, the same numbers as a run that was never stopped.
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,25 +38,29 @@ from typing import Any
 
 import torch
 
-from lanrocli.envs.evaluation import EvaluationReport
+from lanrocli.envs.evaluation import METRIC_NAMES, EvaluationReport, Instruction, Rate, wilson_interval
 from lanrocli.envs.instructor import Kind
 from lanrocli.train.checkpoint import LATEST, CheckpointError, prune, read_pointer, write_pointer
-from lanrocli.train.curriculum import Curriculum, Stage, diff_curricula, load_curriculum
+from lanrocli.train.curriculum import Curriculum, Promote, Stage, diff_curricula, load_curriculum
+from lanrocli.train.seeds import evaluation_seed
+from lanrocli.train.testset import measure
 from lanrocli.train.trainer import Trainer, TrainSettings
 
 CONFIG = "config.yaml"
 METRICS = "metrics.csv"
 REPORT = "report.md"
+TEST = "test.json"
 BEST = "best"
 LAST = "last"
+LANGUAGE = "language"
+"""Key of ``test.json`` under which the last stage's final agent is measured with each ``Instruction``."""
 
 AGENT_METRICS = (
     "critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy"
 )
 METRIC_COLUMNS = (
-    "stage", "stage_name", "env_steps", "stage_steps", "wall_time", "success", "correction_success",
-    *(f"success_{kind.value}" for kind in Kind), "mean_return", "mean_length", "train_success", "rule_holds",
-    *AGENT_METRICS,
+    "stage", "stage_name", "env_steps", "stage_steps", "wall_time", *METRIC_NAMES, "mean_return", "mean_length",
+    "train_success", "rule_value", "rule_holds", *AGENT_METRICS,
 )
 
 
@@ -69,10 +79,13 @@ class StageResult:
     ended: str
     """``promoted`` when the rule held, ``budget`` when the budget ran out first."""
     evaluations: int
-    success: float
-    correction_success: float | None
-    best: float | None
+    rule_value: float | None
+    """What the promotion rule saw at the stage's last evaluation (pooled); None without a rule."""
     wall_time: float
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> StageResult:
+        return cls(**{f.name: data.get(f.name) for f in dataclasses.fields(cls)})
 
 
 @dataclass
@@ -83,10 +96,11 @@ class RunState:
     stage_start: int = 0
     evaluations: int = 0
     """Evaluations so far in the current stage."""
-    passes: int = 0
-    """Consecutive evaluations, up to the last, on which the promotion rule held."""
+    window: list[tuple[int, int]] = field(default_factory=list)
+    """(successes, episodes) on what the rule watches, for the stage's last ``patience`` evaluations."""
     best: float | None = None
-    """Best success so far in this stage, on what its rule watches (overall without a rule)."""
+    """Best success so far in this stage on one evaluation, on what its rule watches (overall without a
+    rule); -1 while no evaluation had such episodes."""
     finished: bool = False
     stopped_early: bool = False
     """The run ended at a stage whose budget ran out with ``on_budget: stop``."""
@@ -97,8 +111,10 @@ class RunState:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RunState:
-        results = [StageResult(**r) for r in data.get("results", [])]
-        return cls(**{**data, "results": results})
+        known = {f.name for f in dataclasses.fields(cls)}
+        results = [StageResult.from_dict(r) for r in data.get("results", [])]
+        window = [(int(k), int(n)) for k, n in data.get("window", [])]
+        return cls(**{**{k: v for k, v in data.items() if k in known}, "results": results, "window": window})
 
 
 class RunObserver:
@@ -117,11 +133,19 @@ def stage_folder(index: int, stage: Stage) -> str:
     return f"stage-{index + 1}-{stage.name}"
 
 
-def rule_value(stage: Stage, report: EvaluationReport) -> float | None:
-    """The success rate the stage's rule watches (overall without a rule); None if the evaluation had no
-    episode of that sort."""
-    rate = report.corrections if stage.promote is not None and stage.promote.on == "corrections" else report.overall
-    return rate.success if rate.episodes else None
+def watched(stage: Stage, report: EvaluationReport) -> Rate:
+    """The episodes the stage's rule watches (all of them without a rule)."""
+    return report.corrected if stage.promote is not None and stage.promote.on == "corrected" else report.overall
+
+
+def pooled_rule(promote: Promote, window: list[tuple[int, int]]) -> tuple[float | None, bool]:
+    """The rule's value on the pooled episodes of ``window`` and whether it holds: only once ``patience``
+    evaluations are pooled, so a stage is never promoted on fewer episodes than its rule asks for."""
+    successes, episodes = sum(k for k, _ in window), sum(n for _, n in window)
+    if episodes == 0:
+        return None, False
+    value = successes / episodes if promote.statistic == "mean" else wilson_interval(successes, episodes)[0]
+    return value, len(window) >= promote.patience and value >= promote.success
 
 
 class CurriculumRun:
@@ -204,6 +228,7 @@ class CurriculumRun:
         checkpoint to resume from)."""
         stages = self.curriculum.stages
         every = self.curriculum.eval.every
+        self.complete_tests()
         while not self.state.finished:
             stage = stages[self.state.stage]
             start = self.state.stage_start
@@ -220,69 +245,93 @@ class CurriculumRun:
     def _evaluate(self, stage: Stage) -> None:
         trainer, state = self.trainer, self.state
         index = state.stage
-        report = trainer.evaluate()
-        value = rule_value(stage, report)
-        holds = stage.promote is not None and value is not None and value >= stage.promote.success
-        state.passes = state.passes + 1 if holds else 0
+        report = trainer.evaluate(evaluation_seed(self.curriculum.seed, index, state.evaluations))
         state.evaluations += 1
-        improved = value is not None and (state.best is None or value > state.best)
+        rate = watched(stage, report)
+        value, holds = None, False
+        if stage.promote is not None:
+            state.window = [*state.window, (rate.successes, rate.episodes)][-stage.promote.patience :]
+            value, holds = pooled_rule(stage.promote, state.window)
+        # An evaluation without the episodes the rule watches ranks below any with them, so every stage has a best.
+        score = rate.success if rate.episodes else -1.0
+        improved = state.best is None or score > state.best
         if improved:
-            state.best = value
-        row = self._row(stage, report, holds)
+            state.best = score
+        row = self._row(stage, report, value, holds)
         _append_row(self.out / METRICS, row)
         self._tensorboard.write(row)
         self.observer.on_evaluation(self, row)
 
         used = trainer.progress.env_steps - state.stage_start
-        promoted = stage.promote is not None and state.passes >= stage.promote.patience
         result = None
-        if promoted or used >= stage.budget.steps:
+        if holds or used >= stage.budget.steps:
             result = StageResult(
                 index=index,
                 name=stage.name,
                 start=state.stage_start,
                 end=trainer.progress.env_steps,
-                ended="promoted" if promoted else "budget",
+                ended="promoted" if holds else "budget",
                 evaluations=state.evaluations,
-                success=report.overall.success,
-                correction_success=report.corrections.success if report.corrections.episodes else None,
-                best=state.best,
+                rule_value=value,
                 wall_time=trainer.wall_time(),
             )
             state.results.append(result)
-            stop = not promoted and stage.on_budget == "stop"
+            stop = not holds and stage.on_budget == "stop"
             state.stopped_early = stop
             state.finished = stop or index + 1 == len(self.curriculum.stages)
             if not state.finished:
-                state.stage, state.stage_start, state.evaluations, state.passes, state.best = (
-                    index + 1, trainer.progress.env_steps, 0, 0, None
+                state.stage, state.stage_start, state.evaluations, state.window, state.best = (
+                    index + 1, trainer.progress.env_steps, 0, [], None
                 )
         self._checkpoint(stage_index=index, best=improved)
         if result is not None:
-            self._write_report()
+            self._test(result)
             self.observer.on_stage_end(self, result)
             if not state.finished:
                 self._enter(state.stage)
 
+    def _test(self, result: StageResult) -> None:
+        """The stage's last and best agents on its held-out test episodes, read back from their
+        checkpoints; the final agent of the run also with a blank and another object's sentence."""
+        stage = self.curriculum.stages[result.index]
+        folder = self.out / stage_folder(result.index, stage)
+        episodes = self.curriculum.test.episodes
+        device = self.trainer.device
+        record = {
+            name: measure(folder / name, episodes, device).record for name in (LAST, BEST) if (folder / name).is_file()
+        }
+        if self.state.finished and result is self.state.results[-1]:
+            plain = {"correction_rate": 0.0}
+            record[LANGUAGE] = {
+                shown.value: measure(folder / LAST, episodes, device, plain, instruction=shown).record
+                for shown in Instruction
+            }
+        _write_json(folder / TEST, record)
+        self._write_report()
+
+    def complete_tests(self) -> None:
+        """Measure stages that ended but were not measured yet: a run killed while testing does it on resume."""
+        for result in self.state.results:
+            stage = self.curriculum.stages[result.index]
+            if not (self.out / stage_folder(result.index, stage) / TEST).is_file():
+                self._test(result)
+
     def _enter(self, index: int) -> None:
         self.trainer.enter_stage(self.curriculum.stages[index].env.env_kwargs(), index)
 
-    def _row(self, stage: Stage, report: EvaluationReport, holds: bool) -> dict[str, Any]:
+    def _row(self, stage: Stage, report: EvaluationReport, value: float | None, holds: bool) -> dict[str, Any]:
         progress = self.trainer.progress
-        by_kind = report.by_kind()
-        corrections = report.corrections
         row: dict[str, Any] = {
             "stage": self.state.stage + 1,
             "stage_name": stage.name,
             "env_steps": progress.env_steps,
             "stage_steps": progress.env_steps - self.state.stage_start,
             "wall_time": round(self.trainer.wall_time(), 1),
-            "success": report.overall.success,
-            "correction_success": corrections.success if corrections.episodes else "",
-            **{f"success_{k.value}": by_kind[k.value].success if k.value in by_kind else "" for k in Kind},
+            **{name: "" if v is None else v for name, v in report.metrics().items()},
             "mean_return": round(report.mean_return, 3),
             "mean_length": round(report.mean_length, 2),
             "train_success": "" if self.trainer.train_success is None else round(self.trainer.train_success, 3),
+            "rule_value": "" if value is None else round(value, 4),
             "rule_holds": int(holds),
         }
         for name in AGENT_METRICS:
@@ -312,7 +361,7 @@ class CurriculumRun:
         prune(folder, keep)
 
     def _write_report(self) -> None:
-        (self.out / REPORT).write_text(render_report(self.curriculum, self.state))
+        (self.out / REPORT).write_text(render_report(self.curriculum, self.state, self.out))
 
     def close(self) -> None:
         self.trainer.close()
@@ -323,31 +372,113 @@ def _percent(value: float | None) -> str:
     return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{100 * value:.0f}%"
 
 
-def render_report(curriculum: Curriculum, state: RunState) -> str:
-    """``report.md``: the plan's outcome per stage, in Markdown."""
+def _with_interval(rate: dict[str, Any]) -> str:
+    """A rate of a ``test.json`` record as ``92.0% [89.3, 94.1] (n)``, or ``-`` without episodes."""
+    if not rate["episodes"]:
+        return "-"
+    low, high = rate["ci"]
+    return f"{100 * rate['success']:.1f}% [{100 * low:.1f}, {100 * high:.1f}] ({rate['episodes']})"
+
+
+def _with_count(rate: dict[str, Any] | None) -> str:
+    return "-" if not rate or not rate["episodes"] else f"{100 * rate['success']:.0f}% ({rate['episodes']})"
+
+
+def _test_rows(index: int, name: str, record: dict[str, Any]) -> list[str]:
+    rows = []
+    for agent in (LAST, BEST):
+        if agent not in record:
+            continue
+        r = record[agent]
+        overall = {"episodes": r["episodes"], "success": r["success"], "ci": r["success_ci"]}
+        episodes = {
+            "episodes": r["correction_episodes"],
+            "success": r["correction_episode_success"],
+            "ci": r["correction_episode_success_ci"],
+        }
+        kinds = [_with_count(r["by_kind"].get(kind.value, {}).get("corrected")) for kind in Kind]
+        rows.append(
+            f"| {index + 1}. {name} | {agent} ({r['checkpoint'].split('/')[-1]}) | {_with_interval(overall)} | "
+            f"{_with_interval(episodes)} | {_with_interval(r['corrected'])} | {' | '.join(kinds)} | "
+            f"{_with_count(r['by_negation']['with_negation'])} |"
+        )
+    return rows
+
+
+def render_report(curriculum: Curriculum, state: RunState, out: Path) -> str:
+    """``report.md``: how each stage went, and its agents on held-out test episodes, in Markdown."""
     lines = [
         f"# {curriculum.name}: {curriculum.task}",
         "",
-        f"Seed {curriculum.seed}, {curriculum.envs} environments, evaluation on {curriculum.eval.episodes} "
-        f"episodes every {curriculum.eval.every} steps.",
+        f"Seed {curriculum.seed}, {curriculum.envs} environments; evaluation on {curriculum.eval.episodes} fresh "
+        f"episodes every {curriculum.eval.every:,} steps; each stage's agents tested on "
+        f"{curriculum.test.episodes} held-out episodes.",
         "",
-        "| stage | rule | steps | ended | evaluations | success | corrections | best | wall time |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "## Stages",
+        "",
+        "| stage | rule | steps | ended | evaluations | rule's value at the end | wall time |",
+        "|---|---|---|---|---|---|---|",
     ]
     for result in state.results:
         stage = curriculum.stages[result.index]
-        rule = f"{stage.promote.on} >= {stage.promote.success:g} x{stage.promote.patience}" if stage.promote else "-"
+        rule = "-"
+        if stage.promote:
+            p = stage.promote
+            rule = f"{p.on} {'>=' if p.statistic == 'mean' else 'lower bound >='} {p.success:g}, {p.patience} pooled"
         lines.append(
             f"| {result.index + 1}. {result.name} | {rule} | {result.end - result.start:,} of "
-            f"{stage.budget.steps:,} | {result.ended} | {result.evaluations} | {_percent(result.success)} | "
-            f"{_percent(result.correction_success)} | {_percent(result.best)} | {result.wall_time / 60:.1f} min |"
+            f"{stage.budget.steps:,} | {result.ended} | {result.evaluations} | {_percent(result.rule_value)} | "
+            f"{result.wall_time / 60:.1f} min |"
         )
     total = state.results[-1].end if state.results else 0
     status = "finished" if state.finished else "running"
     if state.stopped_early:
         status = "stopped: a budget ran out with on_budget: stop"
-    lines += ["", f"Status: {status}. {total:,} environment steps in all."]
+    lines += ["", f"Status: {status}. {total:,} environment steps in all. (Wall time is cumulative.)"]
+
+    tests = {}
+    for result in state.results:
+        path = out / stage_folder(result.index, curriculum.stages[result.index]) / TEST
+        if path.is_file():
+            tests[result.index] = (result.name, json.loads(path.read_text()))
+    if tests:
+        lines += [
+            "",
+            "## Test: held-out episodes",
+            "",
+            "Success with 95% Wilson interval (episodes). Nothing in the run was selected on these episodes. "
+            "Per kind and after a negation: success on the episodes in which that correction was spoken.",
+            "",
+            "| stage | agent | success | correction episodes | corrected | ambiguity | common ground | "
+            "instruction correction | wrong object | after a negation |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for index, (name, record) in tests.items():
+            lines += _test_rows(index, name, record)
+        language = next((record[LANGUAGE] for _, record in reversed(tests.values()) if LANGUAGE in record), None)
+        if language:
+            lines += [
+                "",
+                "## Language check: the final agent on plain test episodes",
+                "",
+                "`true`: the instructor's sentence; `blank`: no words; `other`: a sentence naming another object, "
+                "won when the task holds for that object. An agent that reads its instruction is near chance "
+                "with `blank` and about as good with `other` as with `true`.",
+                "",
+                "| instruction | success |",
+                "|---|---|",
+            ]
+            for shown, r in language.items():
+                overall = {"episodes": r["episodes"], "success": r["success"], "ci": r["success_ci"]}
+                lines.append(f"| {shown} | {_with_interval(overall)} |")
     return "\n".join(lines) + "\n"
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write ``path`` whole or not at all: a kill mid-write leaves the old file or none."""
+    tmp = path.with_name(f".tmp-{path.name}")
+    tmp.write_text(json.dumps(data, indent=1))
+    os.replace(tmp, path)
 
 
 def _append_row(path: Path, row: dict[str, Any]) -> None:

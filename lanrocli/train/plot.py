@@ -1,6 +1,8 @@
 """Learning curves from run folders: success against environment steps, like the paper's figures 3 and 4.
 
-One panel for all episodes and one for correction episodes. Several runs (seeds) are drawn as their mean
+One panel for all episodes and one for the episodes in which a correction was spoken (``corrected_success``;
+a run written before that metric existed shows its ``correction_success``, the success on correction
+episodes, there instead). Several runs (seeds) are drawn as their mean
 with a band of one standard deviation, each run's curve first interpolated onto the steps at which any of
 them was evaluated; a run does not count beyond its last evaluation. Stage boundaries are dashed lines.
 """
@@ -16,7 +18,9 @@ import numpy as np
 
 from lanrocli.train.pipeline import METRICS
 
-PANELS = (("success", "all episodes"), ("correction_success", "correction episodes"))
+PANELS = (("success", "all episodes"), ("corrected_success", "episodes with a spoken correction"))
+OLD_COLUMNS = {"corrected_success": "correction_success"}
+"""Where ``metrics.csv`` files of older runs keep what a panel shows."""
 
 
 @dataclass(frozen=True)
@@ -41,7 +45,10 @@ def read_run(run: Path) -> Curve:
     if not rows:
         raise ValueError(f"{path} has no evaluations yet")
     steps = np.array([int(r["env_steps"]) for r in rows])
-    values = {column: np.array([float(r[column]) if r.get(column) else np.nan for r in rows]) for column, _ in PANELS}
+    values = {}
+    for column, _ in PANELS:
+        source = column if column in rows[0] else OLD_COLUMNS.get(column, column)
+        values[column] = np.array([float(r[source]) if r.get(source) else np.nan for r in rows])
     boundaries = [
         (int(prev["env_steps"]), row["stage_name"])
         for prev, row in zip(rows, rows[1:])

@@ -34,9 +34,6 @@ from lanrocli.train.checkpoint import (
 )
 from lanrocli.train.collect import Collector, state_from_json, state_to_json
 
-EVAL_SEED = 1_000_000
-"""Evaluation episodes use seeds from here on, apart from any training seed."""
-
 SUCCESS_WINDOW = 100
 """Training episodes over which the reported training success is averaged."""
 
@@ -86,12 +83,26 @@ class TrainSettings:
 
 
 def pick_device(requested: str | None) -> torch.device:
-    """``cuda`` when asked (an error if there is none), the default is cuda if available, else cpu."""
+    """The device asked for (``cpu``, ``cuda`` or ``cuda:N``), by default cuda if available, else cpu.
+
+    Any request this machine cannot serve is a ValueError that says why, never torch's own error from
+    deep inside a run: a name torch does not know, a device type lanro does not run on, CUDA where there
+    is none, or a CUDA index beyond the devices there are.
+    """
     if requested is None:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    device = torch.device(requested)
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise ValueError("--device cuda was asked for, but torch sees no CUDA device on this machine")
+    try:
+        device = torch.device(requested)
+    except RuntimeError:
+        device = None
+    if device is None or device.type not in ("cpu", "cuda"):
+        raise ValueError(f"--device {requested!r} is not a device lanro runs on; use cpu, cuda or cuda:N")
+    if device.type == "cuda":
+        count = torch.cuda.device_count() if torch.cuda.is_available() else 0
+        if count == 0:
+            raise ValueError(f"--device {requested} was asked for, but torch sees no CUDA device on this machine")
+        if device.index is not None and device.index >= count:
+            raise ValueError(f"--device {requested} was asked for, but this machine has CUDA devices 0 to {count - 1}")
     return device
 
 
@@ -223,11 +234,11 @@ class Trainer:
             self._restore = None
         return self._collector
 
-    def evaluate(self, episodes: int | None = None) -> EvaluationReport:
-        """The deterministic policy on the stage's fixed evaluation episodes (the same seeds every time)."""
+    def evaluate(self, first_seed: int, episodes: int | None = None) -> EvaluationReport:
+        """The deterministic policy on evaluation episodes; episode i is reset with ``first_seed + i``."""
         env = self.env_factory(evaluation=True)()
         try:
-            return evaluate(env, AgentPolicy(self.agent), episodes or self.settings.eval_episodes, EVAL_SEED)
+            return evaluate(env, AgentPolicy(self.agent), episodes or self.settings.eval_episodes, first_seed)
         finally:
             env.close()
 

@@ -1,4 +1,4 @@
-"""The sentence encoder, the squashed-Gaussian actor, the critic ensemble and the observation normaliser."""
+"""The sentence encoder, the squashed-Gaussian actor and the critic ensemble."""
 
 from __future__ import annotations
 
@@ -15,7 +15,6 @@ from lanrocli.agent.networks import (
     _summarise,
     encode,
 )
-from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.language import grammar_vocabulary, sample_sentence
 
 VOCAB = grammar_vocabulary()
@@ -133,30 +132,6 @@ def test_two_critics_differ_and_each_reads_obs_language_and_action() -> None:
     assert q.shape == (2, 10) and not torch.allclose(q[0], q[1])
     for changed in (critic(obs + 1, language, action), critic(obs, language + 1, action), critic(obs, language, -action)):
         assert not torch.allclose(changed, q)
-
-
-def test_normalizer_matches_the_statistics_of_everything_seen() -> None:
-    rng = np.random.default_rng(0)
-    norm = RunningNormalizer(4, clip=5.0, eps=1e-8)
-    chunks = [rng.normal(3.0, [1.0, 2.0, 0.5, 10.0], size=(n, 4)) for n in (1, 7, 100, 33)]
-    for chunk in chunks:
-        norm.update(chunk.astype(np.float32))
-    seen = np.concatenate(chunks).astype(np.float32).astype(np.float64)
-    np.testing.assert_allclose(norm.mean.numpy(), seen.mean(0), rtol=1e-10)
-    np.testing.assert_allclose(norm.var.numpy(), seen.var(0), rtol=1e-9)
-    x = torch.as_tensor(seen, dtype=torch.float32)
-    expected = ((seen - seen.mean(0)) / np.sqrt(seen.var(0) + 1e-8)).clip(-5, 5)
-    np.testing.assert_allclose(norm(x).numpy(), expected, rtol=1e-4, atol=1e-5)
-    assert norm(torch.full((1, 4), 1e6)).max() == 5.0
-
-
-def test_normalizer_state_round_trips() -> None:
-    norm = RunningNormalizer(3, clip=5.0, eps=1e-4)
-    norm.update(np.arange(12.0).reshape(4, 3))
-    other = RunningNormalizer(3, clip=5.0, eps=1e-4)
-    other.load_state_dict(norm.state_dict())
-    x = torch.randn(5, 3)
-    assert torch.equal(norm(x), other(x))
 
 
 LAYOUT = ObjectLayout(arm=4, object=5, slots=3)

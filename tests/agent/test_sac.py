@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import logging
 
 import numpy as np
 import pytest
@@ -197,16 +198,17 @@ def test_building_and_training_leave_torch_global_generator_alone() -> None:
 
 
 @pytest.mark.parametrize("architecture", ["flat", "objects"])
-def test_state_survives_weights_only_load_and_resumes_bit_identically(architecture: str) -> None:
+def test_state_survives_weights_only_load_and_resumes_bit_identically(
+    architecture: str, caplog: pytest.LogCaptureFixture
+) -> None:
     rng = np.random.default_rng(0)
     agent = _agent(critics=2, architecture=architecture)
     agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
     for _ in range(3):
         agent.update(_batch(rng))
-    file = io.BytesIO()
-    torch.save(agent.state_dict(), file)
-    file.seek(0)
-    resumed = SACAgent.from_state_dict(torch.load(file, weights_only=True))
+    with caplog.at_level(logging.WARNING, logger="lanrocli.agent.sac"):
+        resumed = SACAgent.from_state_dict(_round_trip(agent.state_dict()))
+    assert not caplog.records, "a state saved on this device type continues its noise stream, silently"
     assert resumed.settings == agent.settings and resumed.updates == agent.updates
     obs = {"observation": rng.normal(size=(4, OBS_DIM)).astype(np.float32), "instruction": np.tile(BLUE, (4, 1))}
     for _ in range(3):
@@ -215,6 +217,58 @@ def test_state_survives_weights_only_load_and_resumes_bit_identically(architectu
         assert np.array_equal(agent.act(obs), resumed.act(obs))  # same exploration noise too
     assert all(torch.equal(x, y) for x, y in zip(_parameters(agent), _parameters(resumed)))
     assert torch.equal(agent.normalizer.mean, resumed.normalizer.mean)
+
+
+def _round_trip(state: dict, device: str = "cpu") -> dict:
+    """``state`` through a file, read back as a checkpoint is: weights only, onto ``device``."""
+    file = io.BytesIO()
+    torch.save(state, file)
+    file.seek(0)
+    return torch.load(file, map_location=device, weights_only=True)
+
+
+def test_a_state_from_another_device_type_loads_with_a_derived_noise_stream(caplog: pytest.LogCaptureFixture) -> None:
+    rng = np.random.default_rng(0)
+    agent = _agent(seed=5, architecture="objects")
+    agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
+    for _ in range(2):
+        agent.update(_batch(rng))
+    state = agent.state_dict()
+    # What a CUDA generator saves: a seed and an offset, 16 bytes where a CPU generator keeps thousands.
+    state["generator"] = torch.tensor([7, *[0] * 7, 32, *[0] * 7], dtype=torch.uint8)
+    state["generator_device"] = "cuda"
+    with caplog.at_level(logging.WARNING, logger="lanrocli.agent.sac"):
+        first, second = (SACAgent.from_state_dict(_round_trip(state)) for _ in range(2))
+    assert [r.levelno for r in caplog.records] == [logging.WARNING] * 2
+    message = caplog.records[0].getMessage()
+    assert "saved on cuda" in message and "seed (5) and update count (2)" in message
+    assert first.seed == 5 and first.updates == 2
+    assert all(torch.equal(x, y) for x, y in zip(_parameters(agent), _parameters(first)))
+    assert not torch.equal(first.generator.get_state(), agent.generator.get_state())
+    obs = {"observation": rng.normal(size=(4, OBS_DIM)).astype(np.float32), "instruction": np.tile(RED, (4, 1))}
+    assert np.array_equal(agent.act(obs, deterministic=True), first.act(obs, deterministic=True))
+    # The new stream is a function of the checkpoint: loading it twice gives the same noise and updates.
+    assert np.array_equal(first.act(obs), second.act(obs))
+    batch = _batch(rng)
+    metrics = first.update(batch)
+    assert metrics == second.update(batch) and all(np.isfinite(v) for v in metrics.values())
+
+
+def test_states_that_do_not_record_their_device_type_are_judged_by_their_generator(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    agent = _agent()
+    agent.update(_batch(np.random.default_rng(0)))
+    state = agent.state_dict()
+    del state["generator_device"], state["seed"]
+    with caplog.at_level(logging.WARNING, logger="lanrocli.agent.sac"):
+        same = SACAgent.from_state_dict(_round_trip(state))
+        assert not caplog.records
+        state["generator"] = torch.zeros(16, dtype=torch.uint8)
+        moved = SACAgent.from_state_dict(_round_trip(state))
+    assert torch.equal(same.generator.get_state(), agent.generator.get_state())
+    assert len(caplog.records) == 1 and moved.updates == 1
+    assert np.isfinite(moved.update(_batch(np.random.default_rng(1)))["critic_loss"])
 
 
 def test_loading_needs_the_same_architecture_but_keeps_the_learning_settings() -> None:
@@ -295,3 +349,18 @@ def test_runs_on_cuda_and_matches_the_cpu_initialisation() -> None:
     assert np.isfinite(metrics["critic_loss"])
     state = cuda.state_dict()
     assert SACAgent.from_state_dict(state, device="cpu").updates == 1
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+def test_states_move_between_cpu_and_cuda_in_both_directions() -> None:
+    rng = np.random.default_rng(0)
+    obs = {"observation": rng.normal(size=(4, OBS_DIM)).astype(np.float32), "instruction": np.tile(RED, (4, 1))}
+    for source, target in (("cpu", "cuda"), ("cuda", "cpu")):
+        agent = SACAgent(OBS_DIM, ACTION_DIM, len(VOCAB), _agent().settings, seed=3, device=source)
+        agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
+        agent.update(_batch(rng))
+        moved = SACAgent.from_state_dict(_round_trip(agent.state_dict(), target), device=target)
+        assert moved.generator.device.type == target
+        assert all(t.device.type == target for t in [*_parameters(moved), moved.normalizer.mean])
+        np.testing.assert_allclose(agent.act(obs, deterministic=True), moved.act(obs, deterministic=True), atol=1e-5)
+        assert np.isfinite(moved.update(_batch(rng))["critic_loss"]) and moved.updates == 2

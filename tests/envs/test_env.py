@@ -9,7 +9,7 @@ from gymnasium.utils.env_checker import check_env
 
 from lanrocli.envs import ENV_IDS, LanroEnv, observation_size
 from lanrocli.envs.policies import make_policy
-from lanrocli.language import all_corrections, all_instructions, grammar_vocabulary
+from lanrocli.language import RARE_COLOUR_WORDS, SHAPE_WORDS, all_corrections, all_instructions, grammar_vocabulary
 from lanrocli.sim import WORKSPACE
 
 INFO_KEYS = {
@@ -125,6 +125,22 @@ def test_corrections_reach_the_observation_on_the_step_they_are_spoken(correctin
     assert kinds == {"ambiguity", "common_ground", "instruction_correction", "wrong_object"}
     assert negations == {True, False}
     assert 0 in wrong_first_objects, "work on the object with index 0 must be noticed"
+
+
+@pytest.mark.parametrize("n_objects", [2, 3])
+def test_common_ground_episodes_need_their_rare_colour_word(n_objects: int) -> None:
+    env = LanroEnv(
+        "reach", objects=n_objects, mode="color_shape", correction_rate=1.0, rare_words=True, kinds=["common_ground"]
+    )
+    shape_of = {word: shape for shape, words in SHAPE_WORDS.items() for word in words}
+    for seed in range(100):
+        _, info = env.reset(seed=seed)
+        rare, noun = info["instruction_text"].split()[-2:]
+        assert rare in RARE_COLOUR_WORDS.values()
+        shape = shape_of.get(noun)  # None for "object"
+        without_colour = [k for k, (_, s) in enumerate(info["objects"]) if shape is None or s == shape]
+        assert info["goal_index"] in without_colour and len(without_colour) >= 2, info
+    env.close()
 
 
 def test_delayed_corrections_arrive_within_max_delay() -> None:

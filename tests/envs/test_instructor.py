@@ -41,7 +41,9 @@ def run_episode(seed: int, kind: Kind, negations: bool, delay: int, n_objects: i
     rng = np.random.default_rng(seed)
     settings = InstructorSettings(correction_rate=1.0, negations=negations, max_delay=delay, rare_words=True, kinds=(kind,))
     instructor = Instructor("push", settings)
-    objects, goal = sample_objects(rng, mode, n_objects, need_shared=kind is Kind.AMBIGUITY)
+    objects, goal = sample_objects(
+        rng, mode, n_objects, need_shared=kind is Kind.AMBIGUITY, need_same_shape=kind is Kind.COMMON_GROUND
+    )
     scene = Scene(objects, goal, np.zeros((n_objects, 2)))
     challenge = instructor.draw_challenge(rng)
     assert challenge is kind
@@ -107,6 +109,44 @@ def test_instruction_matches_the_episode_kind() -> None:
             else:
                 assert matching == {scene.goal_index}
             assert (first_text.split()[-2] in COLOUR_OF_WORD) == (kind is Kind.COMMON_GROUND)
+
+
+def without_rare_colour(text: str, objects: tuple[ObjectProps, ...]) -> set[int]:
+    """The objects a listener who skips the instruction's rare colour word would still consider."""
+    rare, noun = text.split()[-2:]
+    assert rare in COLOUR_OF_WORD, f"{text!r} has no rare colour word"
+    _, shape = parse_object([rare, noun])
+    return {i for i, o in enumerate(objects) if fits((None, shape), o)}
+
+
+@pytest.mark.parametrize("mode", list(Mode))
+@pytest.mark.parametrize("n_objects", [2, 3])
+def test_common_ground_instructions_need_their_rare_colour_word(mode: Mode, n_objects: int) -> None:
+    settings = InstructorSettings(correction_rate=1.0, rare_words=True, kinds=(Kind.COMMON_GROUND,))
+    for seed in range(1000):
+        rng = np.random.default_rng(seed)
+        instructor = Instructor("lift", settings)
+        challenge = instructor.draw_challenge(rng)
+        objects, goal = sample_objects(rng, mode, n_objects, need_same_shape=challenge is Kind.COMMON_GROUND)
+        instructor.start(rng, Scene(objects, goal, np.zeros((n_objects, 2))), challenge)
+        candidates = without_rare_colour(instructor.text, objects)
+        assert goal in candidates and len(candidates) >= 2, (instructor.text, objects)
+
+
+def test_common_ground_speaks_only_rare_phrases_whose_colour_word_is_needed() -> None:
+    settings = InstructorSettings(correction_rate=1.0, rare_words=True, kinds=(Kind.COMMON_GROUND,))
+    # Only the goal is a cuboid, so "the azure brick" is understood without its colour word; "the azure
+    # object" is not, and it identifies the goal, the only blue object.
+    scene = Scene((ObjectProps("blue", "cuboid"), ObjectProps("red", "cube")), 0, np.zeros((2, 2)))
+    for seed in range(20):
+        instructor = Instructor("reach", settings)
+        instructor.start(np.random.default_rng(seed), scene, Kind.COMMON_GROUND)
+        assert instructor.text.split()[-2:] == ["azure", "object"]
+    # The other object is blue too, so "the azure object" would not identify the goal, and "the azure
+    # brick" is understood from "brick" alone: no rare phrase is both, and none is spoken.
+    scene = Scene((ObjectProps("blue", "cuboid"), ObjectProps("blue", "cube")), 0, np.zeros((2, 2)))
+    with pytest.raises(RuntimeError, match="common_ground"):
+        Instructor("reach", settings).start(np.random.default_rng(0), scene, Kind.COMMON_GROUND)
 
 
 @pytest.mark.parametrize("delay", [1, 7, 20])

@@ -44,3 +44,22 @@ def test_positions_keep_their_distance_and_area() -> None:
 def test_impossible_spacing_is_reported() -> None:
     with pytest.raises(RuntimeError, match="could not place"):
         sample_positions(np.random.default_rng(0), 3, np.zeros(2), np.full(2, 0.05), 0.5, max_tries=20)
+
+
+@pytest.mark.parametrize("mode", list(Mode))
+@pytest.mark.parametrize("n_objects", [2, 3])
+def test_same_shape_request_puts_another_object_of_the_goals_shape_on_the_table(mode: Mode, n_objects: int) -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(3000):
+        objects, goal_index = sample_objects(rng, mode, n_objects, need_same_shape=True)
+        goal = objects[goal_index]
+        others = [o for j, o in enumerate(objects) if j != goal_index]
+        assert len(set(objects)) == n_objects and all(o.shared_properties(goal) <= 1 for o in others)
+        assert any(o.shape == goal.shape for o in others)
+
+
+def test_scene_requests_keep_scenes_a_function_of_the_seed() -> None:
+    for need in ({"need_shared": True}, {"need_same_shape": True}, {}):
+        first = [sample_objects(np.random.default_rng(s), Mode.COLOR_SHAPE, 3, **need) for s in range(200)]
+        again = [sample_objects(np.random.default_rng(s), Mode.COLOR_SHAPE, 3, **need) for s in range(200)]
+        assert first == again

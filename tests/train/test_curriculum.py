@@ -11,6 +11,7 @@ from lanrocli.agent import SACSettings
 from lanrocli.envs import Kind, Mode
 from lanrocli.language import TASKS
 from lanrocli.train.curriculum import (
+    QUICK_TEST_EPISODES,
     Curriculum,
     CurriculumError,
     EnvConfig,
@@ -54,7 +55,7 @@ def test_valid_file_loads_with_defaults(tmp_path: Path) -> None:
     curriculum = load_curriculum(write(tmp_path, "c.yaml", MINIMAL))
     assert (curriculum.name, curriculum.task, curriculum.seed, curriculum.envs) == ("demo", "push", 0, 2)
     assert curriculum.learning_starts == 1000
-    assert (curriculum.eval.every, curriculum.eval.episodes) == (10_000, 50)
+    assert (curriculum.eval.every, curriculum.eval.episodes, curriculum.test.episodes) == (10_000, 100, 500)
     assert curriculum.agent.settings() == SACSettings()
     stage = curriculum.stages[0]
     assert stage.env == EnvConfig()
@@ -129,18 +130,33 @@ def test_unknown_task_lists_the_allowed_ones(tmp_path: Path) -> None:
     assert all(f"'{task}'" in problem.message for task in TASKS)
 
 
-def test_promote_on_corrections_needs_corrections(tmp_path: Path) -> None:
-    text = MINIMAL + "    promote:\n      success: 0.8\n      on: corrections\n"
+def test_promote_on_corrected_needs_corrections(tmp_path: Path) -> None:
+    text = MINIMAL + "    promote:\n      success: 0.8\n      on: corrected\n"
     problem = only_problem(write(tmp_path, "c.yaml", text))
     assert (problem.line, problem.path) == (6, "stages[0].promote")
     assert "correction_rate > 0" in problem.message
 
 
-def test_promote_on_corrections_with_corrections_loads(tmp_path: Path) -> None:
-    text = MINIMAL + "    env: {correction_rate: 0.5}\n    promote: {success: 0.8, on: corrections, patience: 2}\n"
+def test_promote_on_corrected_with_corrections_loads(tmp_path: Path) -> None:
+    text = MINIMAL + "    env: {correction_rate: 0.5}\n    promote: {success: 0.8, on: corrected, patience: 2}\n"
     promote = load_curriculum(write(tmp_path, "c.yaml", text)).stages[0].promote
     assert promote is not None
-    assert (promote.success, promote.on, promote.patience) == (0.8, "corrections", 2)
+    assert (promote.success, promote.on, promote.patience, promote.statistic) == (0.8, "corrected", 2, "mean")
+
+
+def test_the_old_name_corrections_is_read_as_corrected_with_a_warning(tmp_path: Path) -> None:
+    text = MINIMAL + "    env: {correction_rate: 0.5}\n    promote: {success: 0.8, on: corrections}\n"
+    with pytest.warns(FutureWarning, match="'corrections' is deprecated.*on: corrected"):
+        promote = load_curriculum(write(tmp_path, "c.yaml", text)).stages[0].promote
+    assert promote is not None and promote.on == "corrected"
+
+
+def test_promote_statistic_is_mean_or_lower_bound(tmp_path: Path) -> None:
+    text = MINIMAL + "    promote: {success: 0.8, statistic: lower_bound}\n"
+    promote = load_curriculum(write(tmp_path, "c.yaml", text)).stages[0].promote
+    assert promote is not None and promote.statistic == "lower_bound"
+    problem = only_problem(write(tmp_path, "d.yaml", text.replace("lower_bound", "median")))
+    assert problem.path == "stages[0].promote.statistic" and "lower_bound" in problem.message
 
 
 def test_common_ground_needs_rare_words(tmp_path: Path) -> None:
@@ -236,9 +252,9 @@ def test_missing_file(tmp_path: Path) -> None:
 
 
 def test_yaml_on_key_is_a_string_not_a_boolean(tmp_path: Path) -> None:
-    text = MINIMAL + "    env: {correction_rate: 0.5}\n    promote:\n      success: 0.5\n      on: corrections\n"
+    text = MINIMAL + "    env: {correction_rate: 0.5}\n    promote:\n      success: 0.5\n      on: corrected\n"
     promote = load_curriculum(write(tmp_path, "c.yaml", text)).stages[0].promote
-    assert promote is not None and promote.on == "corrections"
+    assert promote is not None and promote.on == "corrected"
 
 
 def test_exponent_float_loads_as_float(tmp_path: Path) -> None:
@@ -325,7 +341,7 @@ def test_extends_missing_file_names_it(tmp_path: Path) -> None:
 def test_to_yaml_round_trips(tmp_path: Path) -> None:
     text = MINIMAL + """\
     env: {objects: 3, correction_rate: 0.25, kinds: [wrong_object, ambiguity], max_episode_steps: 80}
-    promote: {success: 0.6, on: corrections, patience: 3}
+    promote: {success: 0.6, on: corrected, patience: 3, statistic: lower_bound}
     on_budget: stop
 agent: {actor_lr: 3e-4, max_grad_norm: 1.0}
 """
@@ -342,6 +358,7 @@ def test_quick_caps_budgets_and_evaluation(tmp_path: Path) -> None:
     assert quick.name == "base-quick"
     assert [stage.budget.steps for stage in quick.stages] == [1500, 1000]
     assert (quick.eval.every, quick.eval.episodes, quick.learning_starts) == (500, 5, 256)
+    assert (curriculum.test.episodes, quick.test.episodes) == (500, QUICK_TEST_EPISODES)
     assert quick.agent.buffer_size == 100_000 and quick.agent.batch_size == 64
     assert curriculum.stages[0].budget.steps == 50000  # the original is untouched
 
@@ -364,7 +381,7 @@ def test_builtin_curriculum() -> None:
     assert single.promote is not None and (single.promote.success, single.promote.on) == (0.9, "overall")
     assert corrections.promote is not None and (corrections.promote.success, corrections.promote.on) == (
         0.7,
-        "corrections",
+        "corrected",
     )
     assert (corrections.env.correction_rate, corrections.env.max_delay) == (0.5, 5)
     assert (negations.env.objects, negations.env.mode, negations.env.negations, negations.promote) == (

@@ -14,10 +14,11 @@ from pathlib import Path
 
 import pytest
 
-from lanrocli.envs.evaluation import EpisodeResult, EvaluationReport
+from lanrocli.envs.evaluation import EpisodeResult, EvaluationReport, wilson_interval
 from lanrocli.train.checkpoint import LATEST, read_pointer, resolve_checkpoint
 from lanrocli.train.curriculum import Curriculum, load_curriculum
 from lanrocli.train.pipeline import CONFIG, METRICS, REPORT, CurriculumRun, RunError, RunState
+from lanrocli.train.seeds import evaluation_seed, held_out_seed
 
 TINY = """\
 name: tiny
@@ -27,6 +28,7 @@ envs: {envs}
 learning_starts: 40
 agent: {{batch_size: 16, buffer_size: 4000}}
 eval: {{every: 40, episodes: 2}}
+test: {{episodes: 2}}
 stages:
   - name: first
     env: {{objects: 2, max_episode_steps: 15}}
@@ -58,9 +60,16 @@ def report(successes: list[bool], corrected: list[bool] | None = None) -> Evalua
     )
 
 
-def scripted(run: CurriculumRun, reports: Iterator[EvaluationReport]) -> None:
-    """Replace the run's evaluations by ``reports``, in order, so the test decides what the rule sees."""
-    run.trainer.evaluate = lambda episodes=None: next(reports)  # type: ignore[method-assign]
+def scripted(run: CurriculumRun, reports: Iterator[EvaluationReport], seeds: list[int] | None = None) -> None:
+    """Replace the run's evaluations by ``reports``, in order, so the test decides what the rule sees;
+    ``seeds`` collects the first seed of every evaluation."""
+
+    def evaluate(first_seed: int, episodes: int | None = None) -> EvaluationReport:
+        if seeds is not None:
+            seeds.append(first_seed)
+        return next(reports)
+
+    run.trainer.evaluate = evaluate  # type: ignore[method-assign]
 
 
 def rows(out: Path) -> list[dict[str, str]]:
@@ -68,33 +77,61 @@ def rows(out: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-def test_promotion_happens_exactly_when_the_rule_holds_for_patience_evaluations(tmp_path: Path) -> None:
+def test_promotion_happens_exactly_when_the_pooled_rule_holds(tmp_path: Path) -> None:
     plan = load_curriculum(tiny(tmp_path))
     data = plan.model_dump()
     data["stages"][0]["budget"]["steps"] = 400
     data["stages"][0]["promote"] = {"success": 0.5, "on": "overall", "patience": 2}
     plan = Curriculum.model_validate(data)
     run = CurriculumRun.start(plan, tmp_path / "run")
-    # Evaluations of stage 1: 0.5 holds, 0.0 breaks the streak, then 0.5 and 1.0 hold twice in a row.
+    # Stage 1, pooled over the last two evaluations: one evaluation is not enough even at 1/2; then 1/4,
+    # 1/4 (each evaluation alone at 1/2 would have held), and 3/4 holds.
     stage_one = [report([True, False]), report([False, False]), report([True, False]), report([True, True])]
     rest = [report([False, False], [True, False])] * 4
     scripted(run, iter(stage_one + rest))
     assert run.run()
     run.close()
     first = [r for r in rows(tmp_path / "run") if r["stage_name"] == "first"]
-    assert [r["rule_holds"] for r in first] == ["1", "0", "1", "1"]
+    assert [r["rule_holds"] for r in first] == ["0", "0", "0", "1"]
+    assert [float(r["rule_value"]) for r in first] == [0.5, 0.25, 0.25, 0.75]
     assert [int(r["env_steps"]) for r in first] == [40, 80, 120, 160]
     result = run.state.results[0]
-    assert (result.ended, result.end, result.evaluations, result.best) == ("promoted", 160, 4, 1.0)
+    assert (result.ended, result.end, result.evaluations, result.rule_value) == ("promoted", 160, 4, 0.75)
     # The next stage starts where the first ended and is evaluated from its own start.
     second = [int(r["stage_steps"]) for r in rows(tmp_path / "run") if r["stage_name"] == "second"]
     assert second == [40, 80]
 
 
-def test_a_rule_on_corrections_ignores_plain_episodes(tmp_path: Path) -> None:
+def test_a_lower_bound_rule_needs_enough_episodes(tmp_path: Path) -> None:
+    data = load_curriculum(tiny(tmp_path)).model_dump()
+    data["stages"] = [data["stages"][0]]
+    data["stages"][0]["budget"]["steps"] = 200
+    data["stages"][0]["promote"] = {"success": 0.5, "patience": 2, "statistic": "lower_bound"}
+    run = CurriculumRun.start(Curriculum.model_validate(data), tmp_path / "run")
+    # 4 of 4 pooled has a Wilson lower bound of 0.51; 3 of 4 (0.30) does not pass although its mean would.
+    scripted(run, iter([report([True, True]), report([True, False]), report([True, True]), report([True, True])]))
+    assert run.run()
+    run.close()
+    assert [r["rule_holds"] for r in rows(tmp_path / "run")] == ["0", "0", "0", "1"]
+    assert run.state.results[0].rule_value == pytest.approx(wilson_interval(4, 4)[0])
+
+
+def test_consecutive_evaluations_meet_fresh_episodes(tmp_path: Path) -> None:
+    plan = load_curriculum(tiny(tmp_path))
+    run = CurriculumRun.start(plan, tmp_path / "run")
+    seeds: list[int] = []
+    scripted(run, iter([report([False, False], [True, False])] * 6), seeds)
+    assert run.run()
+    run.close()
+    # Two evaluations in each of three stages, each with its own block of episodes, derived from the run's seed.
+    expected = [evaluation_seed(plan.seed, stage, k) for stage in range(3) for k in range(2)]
+    assert seeds == expected and len(set(seeds)) == 6
+
+
+def test_a_rule_on_corrected_ignores_episodes_without_a_spoken_correction(tmp_path: Path) -> None:
     data = load_curriculum(tiny(tmp_path)).model_dump()
     data["stages"] = [data["stages"][1]]
-    data["stages"][0]["promote"] = {"success": 1.0, "on": "corrections"}
+    data["stages"][0]["promote"] = {"success": 1.0, "on": "corrected"}
     run = CurriculumRun.start(Curriculum.model_validate(data), tmp_path / "run")
     # All plain episodes succeed but the correction episode fails: no promotion; then the correction succeeds.
     scripted(run, iter([report([True, False], [False, True]), report([False, True], [False, True])]))
@@ -130,7 +167,14 @@ def test_the_run_folder_has_every_file(tmp_path: Path) -> None:
         assert {p.name for p in folder.iterdir() if p.is_dir()} == {last.name, best.name}
     assert resolve_checkpoint(out) == read_pointer(out / "stage-3-third" / "last")
     table = (out / REPORT).read_text()
-    assert "| 1. first | overall >= 1 x1 | 80 of 80 | budget |" in table and "Status: finished" in table
+    assert "| 1. first | overall >= 1, 1 pooled | 80 of 80 | budget |" in table and "Status: finished" in table
+    # Every stage's agents were measured on its test episodes, and report.md quotes those figures.
+    for index, name in enumerate(["first", "second", "third"], start=1):
+        tested = json.loads((out / f"stage-{index}-{name}" / "test.json").read_text())
+        assert {"last", "best"} <= set(tested) and tested["last"]["episodes"] == 2
+        assert tested["last"]["episodes_from"]["first_seed"] == held_out_seed(5, index - 1)
+        assert f"| {index}. {name} | last ({read_pointer(out / f'stage-{index}-{name}' / 'last').name})" in table
+    assert set(tested["language"]) == {"true", "blank", "other"}
 
 
 def test_starting_into_a_used_folder_is_refused(tmp_path: Path) -> None:
@@ -171,13 +215,14 @@ def wait_for_rows(out: Path, n: int, process: subprocess.Popen[str]) -> None:
     raise AssertionError(f"the run ended or stalled before {n} evaluations")
 
 
-def outcome(out: Path) -> tuple[list[dict[str, str]], list[tuple[str, int, int, str]]]:
+def outcome(out: Path) -> tuple[list[dict[str, str]], list[tuple[str, int, int, str]], list[dict]]:
     """Everything a run produced that must not depend on interruptions (wall time aside)."""
     metrics = [{k: v for k, v in r.items() if k != "wall_time"} for r in rows(out)]
     saved = json.loads((read_pointer(out / LATEST) / "state.json").read_text())
     state = RunState.from_dict(saved["extra"]["run"])
     stages = [(r.name, r.start, r.end, r.ended) for r in state.results]
-    return metrics, stages
+    tests = [json.loads(path.read_text()) for path in sorted(out.glob("stage-*/test.json"))]
+    return metrics, stages, tests
 
 
 @pytest.mark.parametrize("how", [signal.SIGINT, signal.SIGKILL])

@@ -47,7 +47,7 @@ def test_tiny_training_run_end_to_end() -> None:
     # Every step is either in a stored episode or in the episode still running.
     assert trainer.buffer.size + unfinished == 300
     assert any(not torch.equal(a, b) for a, b in zip(before, parameters(trainer)))
-    report = trainer.evaluate()
+    report = trainer.evaluate(first_seed=0)
     assert report.overall.episodes == 2 and all(r.length <= 100 for r in report.results)
 
 
@@ -98,7 +98,8 @@ def test_entering_a_stage_changes_the_environments_and_keeps_the_learning() -> N
     trainer.run(200)
     trainer.close()
     assert trainer.progress.updates > updates and trainer.buffer.size > stored and trainer.buffer.negations
-    assert trainer.evaluate(1).results[0].length <= 100  # the stage's limit: correction episodes get 100 steps
+    # The stage's limit: correction episodes get 100 steps.
+    assert trainer.evaluate(first_seed=0, episodes=1).results[0].length <= 100
     three = trainer.buffer.data["objects"][: trainer.buffer.high, 2, 0] != 255
     assert three.any() and not three.all()  # both stages' episodes, in one buffer of 3 object slots
 
@@ -168,6 +169,24 @@ def test_cuda_request_without_cuda_is_a_clear_error() -> None:
     if not torch.cuda.is_available():
         with pytest.raises(ValueError, match="no CUDA device"):
             pick_device("cuda")
+
+
+@pytest.mark.parametrize("name", ["tpu", "meta", "", "CUDA", "cuda:-1"])
+def test_device_names_lanro_does_not_run_on_are_a_clear_error(name: str) -> None:
+    from lanrocli.train import pick_device
+
+    with pytest.raises(ValueError, match="not a device lanro runs on"):
+        pick_device(name)
+
+
+def test_a_cuda_index_beyond_the_machines_devices_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    from lanrocli.train import pick_device
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
+    assert pick_device("cuda:1") == torch.device("cuda", 1) and pick_device("cuda").type == "cuda"
+    with pytest.raises(ValueError, match="CUDA devices 0 to 1"):
+        pick_device("cuda:7")
 
 
 def test_two_environments_in_subprocesses_collect_whole_episodes(tmp_path: Path) -> None:

@@ -1,0 +1,35 @@
+"""The gymnasium ids of the four tasks, registered whenever ``lanrocli`` is imported.
+
+Registration names the environment class by an import string, so it loads neither pybullet nor the
+environment module: they load when an environment is made. ``import lanrocli`` therefore stays cheap
+enough for every command of the CLI, and ``gymnasium.make("lanro/Push-v0")`` works after it.
+
+Gymnasium 1.0 dropped the discovery of environments through package entry points, so an interpreter
+that has not imported lanrocli finds the ids by naming the package in the id, which gymnasium imports
+first: ``gymnasium.make("lanrocli:lanro/Push-v0")``.
+"""
+
+from __future__ import annotations
+
+from gymnasium.envs.registration import register, registry
+
+ENV_IDS: dict[str, str] = {
+    "reach": "lanro/Reach-v0",
+    "push": "lanro/Push-v0",
+    "grasp": "lanro/Grasp-v0",
+    "lift": "lanro/Lift-v0",
+}
+"""The gymnasium id of each task."""
+
+ENTRY_POINT = "lanrocli.envs.env:LanroEnv"
+
+
+def register_envs() -> None:
+    """Register every task's id that gymnasium does not know yet.
+
+    Ids already known are left alone, so running it again (a reload of the package, a caller that
+    registers explicitly) changes nothing and gives gymnasium no override to warn about.
+    """
+    for task, env_id in ENV_IDS.items():
+        if env_id not in registry:
+            register(id=env_id, entry_point=ENTRY_POINT, kwargs={"task": task})
