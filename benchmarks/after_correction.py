@@ -28,9 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lanrocli.envs import LanroEnv
-from lanrocli.envs.env import FALLEN
-from lanrocli.envs.evaluation import evaluation_settings
+from lanrocli.envs.env import FALLEN, LanroEnv
 from lanrocli.envs.tasks import REACH_STILL
 from lanrocli.train.trainer import AgentPolicy, load_policy
 
@@ -84,8 +82,8 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     settings, policy = load_policy(args.checkpoint)
-    env_settings = {**evaluation_settings(settings.env), "correction_rate": 1.0, "kinds": args.kinds}
-    env = LanroEnv(settings.task, object_slots=settings.slots, **env_settings)
+    env_settings = settings.env.for_evaluation().replace(correction_rate=1.0, kinds=tuple(args.kinds))
+    env = LanroEnv(settings.task, env_settings, object_slots=settings.slots)
     outcomes = [run(env, policy, args.seed + i) for i in range(args.episodes)]
     env.close()
     spoken = [o for o in outcomes if o is not None]

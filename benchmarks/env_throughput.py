@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from lanrocli.envs import LanroEnv
+from lanrocli.envs.env import LanroEnv
 
 TASKS = ("reach", "push", "grasp", "lift")
 

@@ -23,17 +23,17 @@ import torch
 
 from lanrocli.agent import SACSettings
 from lanrocli.display import StopRequest
-from lanrocli.train import pick_device
 from lanrocli.train.curriculum import Curriculum
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
+from lanrocli.train.trainer import pick_device
 
 AGENT = {"architecture": "objects"}
 """The agent as the shipped curricula configure it; ``--agent`` changes any setting (``architecture=flat``
 for the paper's network)."""
 
 SETTINGS = {
-    "plain": {"objects": 2, "mode": "color", "correction_rate": 0.0},
-    "corrections": {"objects": 2, "mode": "color", "correction_rate": 0.5},
+    "plain": {"objects": 2, "mode": "colour", "correction_rate": 0.0},
+    "corrections": {"objects": 2, "mode": "colour", "correction_rate": 0.5},
 }
 
 

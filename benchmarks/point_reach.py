@@ -29,8 +29,8 @@ import torch
 from pydantic import ValidationError
 
 from lanrocli.agent import EpisodeData, ObjectLayout, ReplayBuffer, SACAgent
-from lanrocli.envs import ARM_SIZE, OBJECT_SIZE
-from lanrocli.language import COLOURS, SHAPES, grammar_vocabulary
+from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE
+from lanrocli.language import COLOURS, SHAPES, ObjectProps, grammar_vocabulary
 from lanrocli.train.curriculum import AgentConfig
 
 from learning import AGENT, agent_overrides  # this directory's learning benchmark: same agent, same --agent parsing
@@ -96,7 +96,7 @@ def episode(
         terminated=terminated,
         achieved=reached,
         goal_index=goal,
-        objects=[(COLOURS[c], "cube") for c in colours],
+        objects=tuple(ObjectProps(COLOURS[c], "cube") for c in colours),
         task="reach",
     )
     return data, bool(terminated[-1])

@@ -21,8 +21,9 @@ from typing import Any
 import torch
 
 from lanrocli.agent import SACSettings
-from lanrocli.envs import LanroEnv
-from lanrocli.train import Trainer, TrainSettings
+from lanrocli.envs.env import LanroEnv
+from lanrocli.envs.settings import EnvSettings
+from lanrocli.train.trainer import Trainer, TrainSettings
 
 
 class Stopwatch:
@@ -43,7 +44,7 @@ class Stopwatch:
 
 
 def run_ours(steps: int, envs: int, learning_starts: int, seed: int, architecture: str) -> dict[str, float]:
-    settings = TrainSettings(task="reach", env={"objects": 2}, seed=seed, envs=envs, learning_starts=learning_starts)
+    settings = TrainSettings(task="reach", env=EnvSettings(objects=2), seed=seed, envs=envs, learning_starts=learning_starts)
     trainer = Trainer(settings, SACSettings(batch_size=256, updates_per_step=1, architecture=architecture))
     simulation, sampling, updating = Stopwatch(), Stopwatch(), Stopwatch()
     trainer.run(envs)  # start the environments before the clock

@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import dataclasses
+import inspect
 import json
 import sys
+import types
+import typing
 import warnings
+from collections.abc import Callable
 from enum import Enum
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import numpy as np
 import typer
@@ -15,10 +20,12 @@ from rich.console import Console
 from rich.table import Table
 
 from lanrocli import __version__
+from lanrocli.choices import Instruction, Task
+from lanrocli.envs.settings import EnvSettings
 from lanrocli.language import all_sentences, grammar_vocabulary, sample_sentence, sentence_stats
 
 if TYPE_CHECKING:
-    from lanrocli.envs.evaluation import EvaluationReport, Instruction
+    from lanrocli.envs.evaluation import EvaluationReport
     from lanrocli.train.curriculum import Curriculum
     from lanrocli.train.testset import Measurement
     from lanrocli.train.trainer import TrainSettings
@@ -41,13 +48,6 @@ def fail(message: str, code: int = 2) -> typer.Exit:
     return typer.Exit(code)
 
 
-class TaskName(str, Enum):
-    reach = "reach"
-    push = "push"
-    grasp = "grasp"
-    lift = "lift"
-
-
 def _version(value: bool) -> None:
     if value:
         typer.echo(f"lanro {__version__}")
@@ -65,7 +65,7 @@ def main(
 
 @app.command("sample-instructions")
 def sample_instructions(
-    task: Annotated[TaskName, typer.Option(help="Task whose verbs the instructor uses.")] = TaskName.reach,
+    task: Annotated[Task, typer.Option(help="Task whose verbs the instructor uses.")] = Task.REACH,
     n: Annotated[int, typer.Option("--n", min=1, help="How many sentences to sample.")] = 10,
     seed: Annotated[int, typer.Option(min=0, help="Random seed; the same seed gives the same sentences.")] = 0,
     corrections: Annotated[bool, typer.Option("--corrections", help="Append a correction to each instruction.")] = False,
@@ -143,12 +143,6 @@ def sample_instructions(
     console.print(table)
 
 
-class ModeName(str, Enum):
-    color = "color"
-    shape = "shape"
-    color_shape = "color_shape"
-
-
 class PolicyName(str, Enum):
     oracle = "oracle"
     mistaken = "mistaken"
@@ -180,30 +174,75 @@ def _print_report(report: EvaluationReport, title: str) -> None:
     Console().print(f"mean episode length {report.mean_length:.1f} steps, mean return {report.mean_return:.1f}")
 
 
-def _env_summary(env: dict[str, object]) -> str:
-    parts = [f"{env['objects']} objects", str(env["mode"])]
-    if env["correction_rate"]:
-        parts.append(f"corrections {env['correction_rate']:g}")
-        if env.get("negations"):
+def _env_summary(env: EnvSettings) -> str:
+    parts = [f"{env.objects} objects", env.mode.value]
+    if env.correction_rate:
+        parts.append(f"corrections {env.correction_rate:g}")
+        if env.negations:
             parts.append("negations")
-        if env.get("max_delay"):
-            parts.append(f"delay <= {env['max_delay']}")
-        if env.get("rare_words"):
+        if env.max_delay:
+            parts.append(f"delay <= {env.max_delay}")
+        if env.rare_words:
             parts.append("rare words")
-        if env.get("kinds"):
-            parts.append("kinds " + ",".join(env["kinds"]))  # type: ignore[arg-type]
-    if env.get("random_start"):
-        parts.append(f"random starts {env['random_start']:g}")
+        if env.kinds:
+            parts.append("kinds " + ",".join(env.kinds))
+    if env.random_start:
+        parts.append(f"random starts {env.random_start:g}")
     return ", ".join(parts)
 
 
-class InstructionName(str, Enum):
-    true = "true"
-    blank = "blank"
-    other = "other"
+def _without_none(hint: Any) -> Any:
+    args = [arg for arg in typing.get_args(hint) if arg is not type(None)]
+    return args[0] if typing.get_origin(hint) in (typing.Union, types.UnionType) and len(args) == 1 else hint
+
+
+def _is_list(hint: Any) -> bool:
+    """Whether a setting holds several values, which the command line reads comma-separated."""
+    return typing.get_origin(_without_none(hint)) is tuple
+
+
+def _with_env_options(command: Callable[..., None]) -> Callable[..., None]:
+    """Give ``command`` one option per ``EnvSettings`` field, from the field's type and ``help``: typer reads
+    the signature, and the command receives them in its ``**env_options``, None where not given."""
+    signature = inspect.signature(command, eval_str=True)
+    hints = typing.get_type_hints(EnvSettings)
+    options = [
+        inspect.Parameter(
+            f.name,
+            inspect.Parameter.KEYWORD_ONLY,
+            default=None,
+            annotation=Annotated[
+                (str if _is_list(hints[f.name]) else _without_none(hints[f.name])) | None,
+                typer.Option(help=f.metadata["help"]),
+            ],
+        )
+        for f in dataclasses.fields(EnvSettings)
+    ]
+    kept = [p for p in signature.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
+    command.__signature__ = signature.replace(parameters=kept + options)  # type: ignore[attr-defined]
+    return command
+
+
+def _env_changes(options: dict[str, Any]) -> dict[str, Any]:
+    """The environment settings given on the command line, each checked on its own so that a problem names
+    its option."""
+    hints = typing.get_type_hints(EnvSettings)
+    changes = {}
+    for name, value in options.items():
+        if value is None:
+            continue
+        if _is_list(hints[name]):
+            value = tuple(part.strip() for part in value.split(",") if part.strip())
+        try:
+            EnvSettings(**{name: value})
+        except ValueError as error:
+            raise fail(f"--{name.replace('_', '-')}: {error}") from None
+        changes[name] = value
+    return changes
 
 
 @app.command("eval")
+@_with_env_options
 def evaluate_command(
     what: Annotated[
         str,
@@ -213,23 +252,7 @@ def evaluate_command(
             "pointer such as RUN/stage-2-corrections/best, or a run folder (its latest checkpoint).",
         ),
     ],
-    task: Annotated[TaskName | None, typer.Option(help="Task (scripted policies; default reach).")] = None,
-    objects: Annotated[int | None, typer.Option(min=2, max=3, help="Objects on the table (2 or 3).")] = None,
-    mode: Annotated[ModeName | None, typer.Option(help="Which properties vary between objects.")] = None,
-    correction_rate: Annotated[
-        float | None, typer.Option(min=0.0, max=1.0, help="Share of correction episodes (0 = plain instructions).")
-    ] = None,
-    negations: Annotated[
-        bool | None, typer.Option("--negations/--no-negations", help="Allow negating corrections.")
-    ] = None,
-    max_delay: Annotated[int | None, typer.Option(min=0, help="Corrections arrive after 0..MAX_DELAY steps.")] = None,
-    rare_words: Annotated[
-        bool | None, typer.Option("--rare-words/--no-rare-words", help="Allow rare colour words (common ground).")
-    ] = None,
-    kinds: Annotated[
-        str | None,
-        typer.Option(help="Comma-separated kinds: ambiguity,common_ground,instruction_correction,wrong_object."),
-    ] = None,
+    task: Annotated[Task | None, typer.Option(help="Task (scripted policies; default reach).")] = None,
     episodes: Annotated[
         int | None,
         typer.Option(min=1, help="Number of episodes (default: a checkpoint's test.episodes, else 100)."),
@@ -243,71 +266,61 @@ def evaluate_command(
         ),
     ] = None,
     instruction: Annotated[
-        InstructionName,
+        Instruction,
         typer.Option(
             help="The sentence the agent reads: the instructor's (true), none (blank), or one naming another "
             "object on the table (other; success is the task on that object).",
         ),
-    ] = InstructionName.true,
+    ] = Instruction.TRUE,
     device: Annotated[str | None, typer.Option(help="cpu or cuda for a trained agent (default: cuda if available).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
     gif: Annotated[Path | None, typer.Option(help="Write the first episodes as an animated GIF here.")] = None,
+    **env_options: Any,
 ) -> None:
     """Evaluate a scripted policy or a trained agent: success overall, on correction episodes, where a correction
     was spoken, per kind, with 95% intervals. For a checkpoint, the environment defaults to the stage it was
     trained on and the episodes to that stage's held-out test episodes; options change them."""
-    from lanrocli.envs import LanroEnv
-    from lanrocli.envs.evaluation import Instruction, evaluate
+    from lanrocli.envs.env import LanroEnv
+    from lanrocli.envs.evaluation import evaluate
     from lanrocli.envs.policies import make_policy
 
-    given = {
-        "objects": objects,
-        "mode": None if mode is None else mode.value,
-        "correction_rate": correction_rate,
-        "negations": negations,
-        "max_delay": max_delay,
-        "rare_words": rare_words,
-        "kinds": None if kinds is None else [k.strip() for k in kinds.split(",") if k.strip()],
-    }
-    overrides = {k: v for k, v in given.items() if v is not None}
-    shown = Instruction(instruction.value)
+    changes = _env_changes(env_options)
     if what in {p.value for p in PolicyName}:
-        if shown is not Instruction.TRUE:
+        if instruction is not Instruction.TRUE:
             raise fail("--instruction changes what a trained agent reads; scripted policies read no sentence")
-        task_name = (task or TaskName.reach).value
-        env_settings = {"objects": 2, "mode": "color", "correction_rate": 0.0, **overrides}
+        task_name = task or Task.REACH
         first = 0 if seed is None else seed
         try:
-            env = LanroEnv(task=task_name, render_mode="rgb_array" if gif else None, **env_settings)
+            env_settings = EnvSettings(**changes)
         except ValueError as error:
             raise fail(f"{error} (see 'lanro eval --help')") from None
+        env = LanroEnv(task_name, env_settings, render_mode="rgb_array" if gif else None)
         try:
             report = evaluate(env, make_policy(what, task_name), episodes or 100, first, gif)
         finally:
             env.close()
-        record = {"policy": what, "task": task_name, "env": env_settings, **report.as_dict()}
+        record = {"policy": what, "task": task_name, "env": env_settings.to_dict(), **report.as_dict()}
         where = f"seed {first}"
     else:
-        measurement = _measure_checkpoint(Path(what), task, overrides, episodes, seed, shown, device, gif)
+        measurement = _measure_checkpoint(Path(what), task, changes, episodes, seed, instruction, device, gif)
         report, record, task_name, env_settings = (
             measurement.report, measurement.record, measurement.settings.task, measurement.env
         )
         where = "held-out test episodes" if measurement.held_out else f"seed {measurement.first_seed}"
-        if shown is not Instruction.TRUE:
-            where += f", instruction {shown.value}"
+        if instruction is not Instruction.TRUE:
+            where += f", instruction {instruction}"
     if as_json:
         typer.echo(json.dumps(record))
         return
-    summary = _env_summary({"mode": "color", "correction_rate": 0.0, **env_settings})
-    _print_report(report, f"{what} on {task_name}, {summary}, {where}")
+    _print_report(report, f"{what} on {task_name}, {_env_summary(env_settings)}, {where}")
     if gif:
         Console().print(f"wrote {gif}")
 
 
 def _measure_checkpoint(
     path: Path,
-    task: TaskName | None,
-    overrides: dict[str, object],
+    task: Task | None,
+    overrides: dict[str, Any],
     episodes: int | None,
     seed: int | None,
     shown: Instruction,
@@ -315,16 +328,17 @@ def _measure_checkpoint(
     gif: Path | None,
 ) -> Measurement:
     """The trained agent at ``path`` measured as ``lanro eval`` was asked; every problem is a clear error."""
-    from lanrocli.train import CheckpointError, pick_device
+    from lanrocli.train.runfolder import CheckpointError
     from lanrocli.train.testset import measure
+    from lanrocli.train.trainer import pick_device
 
     if not path.exists():
         raise fail(f"{path} is neither a scripted policy (oracle, mistaken, random) nor an existing checkpoint path")
 
-    def check(settings: TrainSettings, env_settings: dict[str, object]) -> None:
-        if task is not None and task.value != settings.task:
-            raise fail(f"{path} was trained on {settings.task}; it cannot be evaluated on {task.value}")
-        if int(env_settings.get("objects", 2)) > settings.slots:  # type: ignore[call-overload]
+    def check(settings: TrainSettings, env_settings: EnvSettings) -> None:
+        if task is not None and task != settings.task:
+            raise fail(f"{path} was trained on {settings.task}; it cannot be evaluated on {task}")
+        if env_settings.objects > settings.slots:
             raise fail(f"{path} observes at most {settings.slots} objects; --objects must not exceed that")
 
     try:
@@ -341,7 +355,7 @@ def _test_episodes(path: Path) -> int:
     """The test-set size of the run that ``path`` belongs to, so ``lanro eval`` repeats what report.md quotes."""
     from lanrocli.train.checkpoint import resolve_checkpoint
     from lanrocli.train.curriculum import Curriculum, CurriculumError, HeldOutConfig, load_curriculum
-    from lanrocli.train.pipeline import CONFIG
+    from lanrocli.train.runfolder import CONFIG
 
     config = resolve_checkpoint(path).parent.parent / CONFIG
     try:
@@ -394,7 +408,7 @@ def _print_plan(plan: Curriculum) -> None:
             rule = f"{p.on} {measure} >= {p.success:g} on the episodes of {p.patience} evaluation(s) pooled"
         table.add_row(
             f"{i + 1}. {stage.name}",
-            _env_summary(stage.env.model_dump()),
+            _env_summary(stage.env.settings()),
             f"{stage.budget.steps:,} steps",
             rule,
             stage.on_budget,
@@ -428,9 +442,9 @@ def train_command(
     import torch
 
     from lanrocli.display import StopRequest, TrainingDisplay
-    from lanrocli.train import pick_device
     from lanrocli.train.curriculum import CurriculumError
     from lanrocli.train.pipeline import CurriculumRun, RunError
+    from lanrocli.train.trainer import pick_device
 
     if curriculum is None and not quick and not resume:
         raise fail("give a curriculum file (e.g. curricula/reach.yaml), or --quick for the built-in one")

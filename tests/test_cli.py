@@ -150,7 +150,7 @@ def test_quick_training_run_then_eval_plot_and_refusals(tmp_path) -> None:
     blank = runner.invoke(app, ["eval", str(out), "--instruction", "blank", "--correction-rate", "0", "--json"])
     assert json.loads(blank.output) == tested["language"]["blank"]
     best = runner.invoke(app, ["eval", str(out / "stage-1-single" / "best"), "--episodes", "2"])
-    assert best.exit_code == 0 and "2 objects, color" in best.output
+    assert best.exit_code == 0 and "2 objects, colour" in best.output
     assert runner.invoke(app, ["eval", str(out), "--task", "push"]).exit_code == 2
 
     plot = runner.invoke(app, ["plot", str(out), "--out", str(tmp_path / "curves.png")])
@@ -204,7 +204,7 @@ UNSERVED_DEVICES = [
 def untrained_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A checkpoint that loads: a device problem is then the only thing wrong with an eval."""
     from lanrocli.agent import SACSettings
-    from lanrocli.train import Trainer, TrainSettings
+    from lanrocli.train.trainer import Trainer, TrainSettings
 
     trainer = Trainer(TrainSettings(task="reach"), SACSettings(hidden_size=16, obs_size=16, buffer_size=10))
     return trainer.save(tmp_path_factory.mktemp("run") / "checkpoint", resumable=False)

@@ -37,7 +37,7 @@ def test_importing_the_package_registers_every_task_without_loading_torch_or_pyb
 def test_a_fresh_interpreter_reaches_the_ids_through_the_package_name() -> None:
     result = run_python(
         "import sys, gymnasium as gym\n"
-        "env = gym.make('lanrocli:lanro/Push-v0', objects=3, mode='color_shape')\n"
+        "env = gym.make('lanrocli:lanro/Push-v0', objects=3, mode='colour_shape')\n"
         "obs, info = env.reset(seed=0)\n"
         "assert env.unwrapped.task.name == 'push' and len(info['objects']) == 3\n"
         "env.close()\n"

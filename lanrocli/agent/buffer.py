@@ -14,19 +14,15 @@ Sampling then needs only vectorised indexing.
 
 from __future__ import annotations
 
-import json
-from collections.abc import Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from lanrocli.agent.relabel import sentence_pool
-from lanrocli.language import COLOURS, SHAPES, TASKS, ObjectProps, Vocabulary, check_task, grammar_vocabulary
-
-# Eq. 1 of the paper: 0 when the task condition holds for the goal object, -1 otherwise.
-SUCCESS_REWARD = 0.0
-FAILURE_REWARD = -1.0
+from lanrocli.language import TASKS, ObjectProps, Vocabulary, check_task, grammar_vocabulary
+from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 
 NO_OBJECT = np.iinfo(np.uint8).max
 """Property index stored for an object slot that the episode's scene leaves empty."""
@@ -54,7 +50,7 @@ class EpisodeData:
     terminated: np.ndarray  # bool [T]
     achieved: np.ndarray  # bool [T, n_objects]
     goal_index: int
-    objects: Sequence[ObjectProps] | Sequence[tuple[str, str]]
+    objects: tuple[ObjectProps, ...]
     task: str
 
     def __len__(self) -> int:
@@ -170,7 +166,7 @@ class ReplayBuffer:
     def add_episode(self, episode: EpisodeData) -> None:
         """Store one episode, retiring whole older episodes where it overwrites them."""
         steps = len(episode)
-        objects = [o if isinstance(o, ObjectProps) else ObjectProps(*o) for o in episode.objects]
+        objects = episode.objects
         self._check(episode, steps, len(objects))
         if steps > self.capacity:
             raise ValueError(f"an episode of {steps} steps does not fit a buffer of {self.capacity} transitions")
@@ -193,8 +189,7 @@ class ReplayBuffer:
         d["achieved"][lo:hi, :n] = episode.achieved
         d["goal_index"][lo:hi] = episode.goal_index
         d["objects"][lo:hi] = NO_OBJECT
-        d["objects"][lo:hi, :n, 0] = [COLOURS.index(o.colour) for o in objects]
-        d["objects"][lo:hi, :n, 1] = [SHAPES.index(o.shape) for o in objects]
+        d["objects"][lo:hi, :n] = [o.indices for o in objects]
         d["task"][lo:hi] = TASKS.index(episode.task)
         d["episode_start"][lo:hi] = lo
         d["episode_length"][lo:hi] = steps
@@ -338,10 +333,12 @@ class ReplayBuffer:
             chosen = np.concatenate([chosen, draw[valid[draw]]])
         return chosen[:batch_size]
 
-    # -- saving --------------------------------------------------------------------------------------------
+    # -- state -------------------------------------------------------------------------------------------
 
-    def save(self, path: str | Path) -> None:
-        """Write the buffer as a compressed ``.npz`` that :meth:`load` reads back exactly."""
+    def state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """What :meth:`from_state` needs to continue exactly: settings and counters as plain data, and the
+        arrays up to the highest slot ever written. The arrays are views, not copies, so writing a large
+        buffer to a file does not first double it in memory; where it is written is the caller's business."""
         meta = {
             "format": _FORMAT,
             "capacity": self.capacity,
@@ -357,28 +354,26 @@ class ReplayBuffer:
             "episodes_added": self.episodes_added,
             "rng": self.rng.bit_generator.state,
         }
-        arrays = {name: array[: self.high] for name, array in self.data.items()}
-        with open(path, "wb") as f:
-            np.savez_compressed(f, meta=np.array(json.dumps(meta)), **arrays)
+        return meta, {name: array[: self.high] for name, array in self.data.items()}
 
     @classmethod
-    def load(cls, path: str | Path) -> ReplayBuffer:
-        with np.load(path, allow_pickle=False) as archive:
-            meta = json.loads(str(archive["meta"]))
-            if meta["format"] != _FORMAT:
-                raise ValueError(f"replay buffer file format {meta['format']} is not {_FORMAT}")
-            buffer = cls(
-                capacity=meta["capacity"],
-                obs_dim=meta["obs_dim"],
-                action_dim=meta["action_dim"],
-                max_objects=meta["max_objects"],
-                vocabulary=Vocabulary.from_dict(meta["vocabulary"]),
-                pool_rows=meta["pool_rows"],
-                negations=meta["negations"],
-            )
-            high = meta["high"]
-            for name, array in buffer.data.items():
-                array[:high] = archive[name]
+    def from_state(cls, meta: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> ReplayBuffer:
+        """The buffer that :meth:`state` described. ``arrays`` may hold more than the buffer's arrays, and
+        may be an open ``np.load`` archive, which then reads each array only as it is copied in."""
+        if meta["format"] != _FORMAT:
+            raise ValueError(f"replay buffer file format {meta['format']} is not {_FORMAT}")
+        buffer = cls(
+            capacity=meta["capacity"],
+            obs_dim=meta["obs_dim"],
+            action_dim=meta["action_dim"],
+            max_objects=meta["max_objects"],
+            vocabulary=Vocabulary.from_dict(meta["vocabulary"]),
+            pool_rows=meta["pool_rows"],
+            negations=meta["negations"],
+        )
+        high = meta["high"]
+        for name, array in buffer.data.items():
+            array[:high] = arrays[name]
         buffer.rng.bit_generator.state = meta["rng"]
         buffer.position = meta["position"]
         buffer.high = high

@@ -18,6 +18,7 @@ from torch import nn
 from lanrocli.agent.buffer import Batch, ReplayBuffer
 from lanrocli.agent.networks import Actor, Critic, LanguageEncoder, ObjectLayout, encode
 from lanrocli.agent.normalizer import RunningNormalizer
+from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 
 _FORMAT = 1
 
@@ -262,7 +263,7 @@ class SACAgent:
             next_q = self.target_critic(next_obs, next_target_language, next_action, next_present)
             target_q = reward + s.gamma * not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
             if s.clip_target:
-                target_q = target_q.clamp(-1.0 / (1.0 - s.gamma), 0.0)
+                target_q = target_q.clamp(FAILURE_REWARD / (1.0 - s.gamma), SUCCESS_REWARD)
         # Object-wise readers weigh the objects once per network: the same attention serves the networks and
         # the grounding loss.
         critic_scores = actor_scores = None

@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from lanrocli.envs.instructor import Instructor, InstructorSettings, Kind
-from lanrocli.envs.scene import Mode, Scene, sample_scene
+from lanrocli.choices import Kind
+from lanrocli.envs.instructor import Instructor
+from lanrocli.envs.scene import Scene, sample_scene
+from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.tasks import TaskView, make_task
 from lanrocli.language import COLOURS, SHAPES, grammar_vocabulary
+from lanrocli.reward import reward
 from lanrocli.sim import OBJECT_AREA, SHAPES as SIM_SHAPES, WORKSPACE, ObjectSet, Panda, World, resting_position
 
 ARM_SIZE = 7
@@ -21,8 +23,6 @@ OBJECT_SIZE = 3 + 3 + 3 + 4 + 3 + 3 + len(COLOURS) + len(SHAPES)
 """Per object: position (3), position relative to the end effector (3), displacement since the episode
 began (3), quaternion x y z w (4), linear (3) and angular (3) velocity, one-hot colour and shape."""
 
-PLAIN_LIMIT = 50
-CORRECTION_LIMIT = 100
 MIN_SPACING_SIZES = 3.0
 """Objects start at least this many object sizes apart."""
 
@@ -80,9 +80,10 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ``instruction`` is the current goal sentence (instruction, plus the correction from the step it is
     spoken) in the grammar-wide vocabulary, padded with 0. Reward is 0 when the task holds for the goal
     object, else -1; success ends the episode (terminated), and so does an object falling off the table
-    (truncated). ``info`` carries ``is_success``, ``achieved`` (per object),
-    ``goal_index``, ``object_positions``, ``objects``, ``instruction_text``, ``challenge`` (the
-    misunderstanding of a correction episode, or ``None``) and ``correction`` (``None`` until spoken).
+    (truncated). ``info`` carries ``is_success``, ``achieved`` (per object), ``goal_index``,
+    ``object_positions``, ``objects`` (``ObjectProps`` in observation order), ``instruction_text``,
+    ``challenge`` (the ``Kind`` of misunderstanding of a correction episode, or ``None``) and ``correction``
+    (``None`` until spoken).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
@@ -90,47 +91,27 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     def __init__(
         self,
         task: str = "reach",
-        objects: int = 2,
-        mode: str = "color",
-        correction_rate: float = 0.0,
-        negations: bool = False,
-        max_delay: int = 0,
-        rare_words: bool = False,
-        kinds: Sequence[str] | None = None,
-        max_episode_steps: int | None = None,
+        settings: EnvSettings | None = None,
+        *,
         object_slots: int | None = None,
-        random_start: float = 0.0,
         render_mode: str | None = None,
         gui: bool = False,
+        **changes: Any,
     ) -> None:
-        if objects not in (2, 3):
-            raise ValueError(f"objects must be 2 or 3, got {objects!r}")
-        slots = objects if object_slots is None else object_slots
-        if slots < objects:
-            raise ValueError(f"object_slots ({slots}) must be at least objects ({objects})")
-        try:
-            self.mode = Mode(mode)
-        except ValueError:
-            raise ValueError(f"mode must be one of {[m.value for m in Mode]}, got {mode!r}") from None
+        """``settings`` (default: ``EnvSettings()``), with any of its fields changed by keyword, as
+        ``gymnasium.make("lanro/Push-v0", objects=3)`` passes them."""
+        settings = (settings or EnvSettings()).replace(**changes)
+        slots = settings.objects if object_slots is None else object_slots
+        if slots < settings.objects:
+            raise ValueError(f"object_slots ({slots}) must be at least objects ({settings.objects})")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        if max_episode_steps is not None and max_episode_steps < 1:
-            raise ValueError(f"max_episode_steps must be positive, got {max_episode_steps}")
-        if not 0.0 <= random_start <= 1.0:
-            raise ValueError(f"random_start must be a probability within [0, 1], got {random_start}")
-        self.random_start = float(random_start)
+        self.settings = settings
         self.task = make_task(task)
-        self.settings = InstructorSettings(
-            correction_rate=correction_rate,
-            negations=negations,
-            max_delay=max_delay,
-            rare_words=rare_words,
-            kinds=tuple(Kind) if kinds is None else tuple(kinds),
-        )
-        self.n_objects = objects
+        self.n_objects = objects = settings.objects
         self.object_slots = slots
         self.render_mode = render_mode
-        self.max_episode_steps = max_episode_steps or (CORRECTION_LIMIT if correction_rate > 0 else PLAIN_LIMIT)
+        self.max_episode_steps = settings.episode_limit
         self.vocabulary = grammar_vocabulary()
         n = observation_size(slots)
         self.observation_space = gym.spaces.Dict(
@@ -141,13 +122,12 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 ),
             }
         )
-        action_size = 4 if self.task.gripper else 3
-        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(action_size,), dtype=np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.task.action_size,), dtype=np.float32)
 
         self.world = World(gui=gui)
         self.robot = Panda(self.world, gripper=self.task.gripper)
         self.objects = ObjectSet(self.world)
-        self.instructor = Instructor(self.task.name, self.settings)
+        self.instructor = Instructor(self.task.name, settings.instructor)
         self._scene: Scene | None = None
         self._start_positions = np.zeros((objects, 3))
         self._heights = np.zeros(objects)
@@ -155,7 +135,6 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._empty_slots = np.zeros((slots - objects) * OBJECT_SIZE)
         self._tokens = np.zeros(self.vocabulary.max_length, dtype=np.int64)
         self._achieved = np.zeros(objects, dtype=bool)
-        self._object_words: tuple[tuple[str, str], ...] = ()
         self._steps = 0
         self._area_low = np.array(OBJECT_AREA.low[:2])
         self._area_high = np.array(OBJECT_AREA.high[:2])
@@ -171,7 +150,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         challenge = self.instructor.draw_challenge(rng)
         scene = sample_scene(
             rng,
-            self.mode,
+            self.settings.mode,
             self.n_objects,
             self._area_low,
             self._area_high,
@@ -187,7 +166,6 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._reset_arm(rng)
         self._start_positions = np.array(self.objects.states().positions)
         self._heights = np.array([SIM_SHAPES[o.shape].height for o in scene.objects])
-        self._object_words = tuple((o.colour, o.shape) for o in scene.objects)
         self._properties[:] = 0.0
         for k, obj in enumerate(scene.objects):
             self._properties[k, COLOURS.index(obj.colour)] = 1.0
@@ -205,7 +183,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         the middle) seldom leads to; random starts near the table make it common in training.
         """
         width = 0.08 if self.task.gripper else 0.0
-        if self.random_start > 0.0 and rng.random() < self.random_start:
+        if self.settings.random_start > 0.0 and rng.random() < self.settings.random_start:
             low = (*WORKSPACE.low[:2], START_HEIGHT[0])
             high = (*WORKSPACE.high[:2], START_HEIGHT[1])
             for _ in range(START_TRIES):
@@ -228,7 +206,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         # Truncated, not terminated: ending there must not look like the zero future value of a success.
         fallen = bool(np.any(self.objects.states().positions[:, 2] < FALLEN))
         truncated = not success and (self._steps >= self.max_episode_steps or fallen)
-        return self._observation(), 0.0 if success else -1.0, success, truncated, self._info()
+        return self._observation(), reward(success), success, truncated, self._info()
 
     # -- what the agent and the tools see --------------------------------------------------------------
 
@@ -273,9 +251,9 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "achieved": self._achieved.copy(),
             "goal_index": self._scene.goal_index,
             "object_positions": np.array(self.objects.states().positions),
-            "objects": self._object_words,
+            "objects": self._scene.objects,
             "instruction_text": self.instructor.text,
-            "challenge": None if self.instructor.challenge is None else self.instructor.challenge.value,
+            "challenge": self.instructor.challenge,
             "correction": None if spoken is None else spoken.as_info(),
         }
 

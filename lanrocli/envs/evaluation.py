@@ -4,18 +4,20 @@ correction episodes, per kind of misunderstanding, and with or without negation.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from enum import Enum
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from lanrocli.envs.env import LanroEnv
-from lanrocli.envs.instructor import Kind
-from lanrocli.envs.policies import Policy
-from lanrocli.language import TASK_VERBS, ObjectProps, identifying_phrases, instruction, pick
+from lanrocli.choices import Instruction, Kind
+from lanrocli.language import TASK_VERBS, identifying_phrases, instruction, pick
+from lanrocli.reward import reward
+
+if TYPE_CHECKING:
+    from lanrocli.envs.env import LanroEnv
+    from lanrocli.envs.policies import Policy
 
 GIF_EPISODES = 3
 
@@ -26,12 +28,6 @@ METRIC_NAMES = (
     "corrected_episodes_negation", "corrected_success_negation",
 )
 """The flat metrics of one evaluation (``EvaluationReport.metrics``), as ``metrics.csv`` names its columns."""
-
-
-def evaluation_settings(env: Mapping[str, Any]) -> dict[str, Any]:
-    """A stage's environment settings as evaluation uses them: every episode starts from the neutral pose
-    (random starts are for training), so success is comparable across runs and curricula."""
-    return {**env, "random_start": 0.0}
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -45,20 +41,6 @@ def wilson_interval(successes: int, n: int, z: float = 1.96) -> tuple[float, flo
     return (max(0.0, centre - half), min(1.0, centre + half))
 
 
-class Instruction(str, Enum):
-    """Which sentence the agent reads during an episode: the check that it follows language at all.
-
-    ``true`` is the instructor's sentence; ``blank`` is all padding, so an agent that reads language falls to
-    about chance among the objects; ``other`` names another object on the table, and the episode is won
-    when the task holds for that object, so an agent that reads language does about as well as with
-    ``true``. A policy that scores high on ``blank`` or low on ``other`` ignores its instruction.
-    """
-
-    TRUE = "true"
-    BLANK = "blank"
-    OTHER = "other"
-
-
 OTHER_STREAM = 0x07E4
 """Mixed into an episode's seed to draw the object that ``other`` names, apart from the episode's own draws."""
 
@@ -67,7 +49,7 @@ OTHER_STREAM = 0x07E4
 class EpisodeResult:
     success: bool
     length: int
-    challenge: str | None
+    challenge: Kind | None
     """The misunderstanding the episode was set up with (a correction episode), or None."""
     corrected: bool
     """Whether a correction was spoken."""
@@ -195,7 +177,7 @@ class EvaluationReport:
 def _other_sentence(env: LanroEnv, info: dict[str, Any], seed: int) -> tuple[int, np.ndarray]:
     """An object other than the goal and an instruction that names it uniquely, drawn from the seed."""
     rng = np.random.default_rng([seed, OTHER_STREAM])
-    objects = [ObjectProps(colour, shape) for colour, shape in info["objects"]]
+    objects = list(info["objects"])
     named = int(pick(rng, [i for i in range(len(objects)) if i != int(info["goal_index"])]))
     others = objects[:named] + objects[named + 1 :]
     text = instruction(pick(rng, TASK_VERBS[env.task.name]), pick(rng, identifying_phrases(objects[named], others)))
@@ -225,7 +207,7 @@ def run_episode(
         shown = observation if tokens is None else {**observation, "instruction": tokens}
         observation, _, terminated, truncated, info = env.step(policy.act(shown, info))
         achieved = bool(info["achieved"][target])
-        total += 0.0 if achieved else -1.0
+        total += reward(achieved)
         length += 1
         if frames is not None:
             frames.append(env.render())

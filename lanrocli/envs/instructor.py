@@ -11,10 +11,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from enum import Enum
 
 import numpy as np
 
+from lanrocli.choices import Kind
 from lanrocli.language import (
     BEGINNING_WORDS,
     TASK_VERBS,
@@ -33,14 +33,8 @@ from lanrocli.language import (
 )
 from lanrocli.envs.scene import Scene
 
-
-class Kind(str, Enum):
-    """The misunderstanding a correction episode is built around."""
-
-    AMBIGUITY = "ambiguity"
-    COMMON_GROUND = "common_ground"
-    INSTRUCTION_CORRECTION = "instruction_correction"
-    WRONG_OBJECT = "wrong_object"
+MAX_DELAY = 20
+"""Most steps a correction may wait after the mistake: later, the arm has long moved on."""
 
 
 @dataclass(frozen=True)
@@ -56,8 +50,8 @@ class InstructorSettings:
     def __post_init__(self) -> None:
         if not 0.0 <= self.correction_rate <= 1.0:
             raise ValueError(f"correction_rate must be within [0, 1], got {self.correction_rate}")
-        if not isinstance(self.max_delay, (int, np.integer)) or self.max_delay < 0:
-            raise ValueError(f"max_delay must be a non-negative integer number of steps, got {self.max_delay!r}")
+        if not isinstance(self.max_delay, (int, np.integer)) or not 0 <= self.max_delay <= MAX_DELAY:
+            raise ValueError(f"max_delay must be a whole number of steps within [0, {MAX_DELAY}], got {self.max_delay!r}")
         try:
             kinds = tuple(Kind(k) for k in self.kinds)
         except ValueError:
@@ -65,7 +59,10 @@ class InstructorSettings:
                 f"kinds must be a subset of {[k.value for k in Kind]}, got {list(self.kinds)}"
             ) from None
         if not kinds:
-            raise ValueError("kinds must name at least one kind of correction")
+            raise ValueError("kinds must name at least one kind of correction; leave it out to allow all kinds")
+        repeated = sorted({kind.value for kind in kinds if kinds.count(kind) > 1})
+        if repeated:
+            raise ValueError(f"kinds names {', '.join(repeated)} more than once")
         object.__setattr__(self, "kinds", kinds)
         if self.correction_rate > 0 and not self.active_kinds:
             raise ValueError("kinds=['common_ground'] needs rare_words=True: without rare words there is no such case")

@@ -13,6 +13,9 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from lanrocli.choices import Task
+from lanrocli.envs.tasks import make_task
+from lanrocli.language import ObjectProps
 from lanrocli.sim import MAX_STEP, SHAPES
 
 HOVER = 0.07
@@ -51,7 +54,7 @@ def _radius(shape: str) -> float:
     return float(max(SHAPES[shape].half_extents[:2]))
 
 
-def _push_direction(target: int, positions: np.ndarray, objects: tuple[tuple[str, str], ...]) -> np.ndarray:
+def _push_direction(target: int, positions: np.ndarray, objects: tuple[ObjectProps, ...]) -> np.ndarray:
     """The horizontal direction whose push path and approach point stay farthest from the other objects."""
     best, best_clearance = np.array([1.0, 0.0]), -np.inf
     start = positions[target, :2]
@@ -61,7 +64,7 @@ def _push_direction(target: int, positions: np.ndarray, objects: tuple[tuple[str
         clearance = np.inf
         for k in range(len(positions)):
             if k != target:
-                gap = np.linalg.norm(path - positions[k, :2], axis=1).min() - _radius(objects[k][1])
+                gap = np.linalg.norm(path - positions[k, :2], axis=1).min() - _radius(objects[k].shape)
                 clearance = min(clearance, gap)
         # Prefer pushes towards the middle of the table so the object stays reachable.
         clearance -= 0.2 * max(0.0, float(np.dot(start, u)))
@@ -74,7 +77,7 @@ def _push_direction(target: int, positions: np.ndarray, objects: tuple[tuple[str
 class _Solver:
     """Does the task on one object, phase by phase; a new target object restarts it."""
 
-    task: str
+    task: Task
     target: int = -1
     phase: int = 0
     timer: int = 0
@@ -83,17 +86,17 @@ class _Solver:
     def aim(self, target: int, info: dict[str, Any]) -> None:
         if target != self.target:
             self.target, self.phase, self.timer = target, 0, 0
-            if self.task == "push":
+            if self.task is Task.PUSH:
                 self.direction = _push_direction(target, info["object_positions"], info["objects"])
 
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> np.ndarray:
         ee = observation["observation"][:3].astype(np.float64)
         pos = np.asarray(info["object_positions"][self.target], dtype=np.float64)
-        shape = info["objects"][self.target][1]
+        shape = info["objects"][self.target].shape
         top = pos[2] + SHAPES[shape].half_extents[2]
-        if self.task == "reach":
+        if self.task is Task.REACH:
             return self._reach(ee, pos, top)
-        if self.task == "push":
+        if self.task is Task.PUSH:
             return self._push(ee, pos, shape)
         return self._grasp(ee, pos, top)
 
@@ -147,7 +150,7 @@ class OraclePolicy:
     """Solves the task on ``info['goal_index']``, the object the instructor means."""
 
     def __init__(self, task: str) -> None:
-        self._solver = _Solver(task)
+        self._solver = _Solver(Task(task))
 
     def reset(self, seed: int | None = None) -> None:
         self._solver = _Solver(self._solver.task)
@@ -161,7 +164,7 @@ class MistakenPolicy:
     """Works on a wrong object until the instructor speaks a correction, then on the goal."""
 
     def __init__(self, task: str) -> None:
-        self._solver = _Solver(task)
+        self._solver = _Solver(Task(task))
         self._rng = np.random.default_rng()
         self._wrong: int | None = None
 
@@ -185,7 +188,7 @@ class RandomPolicy:
     """Uniform random actions."""
 
     def __init__(self, task: str) -> None:
-        self._size = 4 if task in ("grasp", "lift") else 3
+        self._size = make_task(task).action_size
         self._rng = np.random.default_rng()
 
     def reset(self, seed: int | None = None) -> None:

@@ -7,19 +7,11 @@ names both of the goal's properties always identifies it, and every correction c
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import Enum
 
 import numpy as np
 
+from lanrocli.choices import Mode
 from lanrocli.language import COLOURS, SHAPES, ObjectProps
-
-
-class Mode(str, Enum):
-    """Which properties vary between objects."""
-
-    COLOR = "color"  # cubes in the 9 colours
-    SHAPE = "shape"  # the 3 shapes in 3 colours
-    COLOR_SHAPE = "color_shape"  # the 3 shapes in the 9 colours
 
 
 SHAPE_MODE_COLOURS: tuple[str, ...] = ("red", "green", "blue")
@@ -27,7 +19,7 @@ SHAPE_MODE_COLOURS: tuple[str, ...] = ("red", "green", "blue")
 
 def mode_catalogue(mode: Mode) -> tuple[ObjectProps, ...]:
     """Every object a mode may put on the table."""
-    if mode is Mode.COLOR:
+    if mode is Mode.COLOUR:
         return tuple(ObjectProps(c, "cube") for c in COLOURS)
     colours = SHAPE_MODE_COLOURS if mode is Mode.SHAPE else COLOURS
     return tuple(ObjectProps(c, s) for c in colours for s in SHAPES)
@@ -62,7 +54,7 @@ def sample_objects(
     of another colour), which a common-ground instruction needs: "the azure brick" tests whether the
     agent has learnt the rare word only if "the brick" alone would leave a choice. The other rare form,
     "the azure object", names no shape and leaves every object a candidate without the colour word. In
-    ``color`` mode every object is a cube, so any scene qualifies; in the other modes the goal's shape
+    ``colour`` mode every object is a cube, so any scene qualifies; in the other modes the goal's shape
     comes in at least three colours, so such an object always exists. Each request is met by swapping
     one drawn object for a qualifying one: two more draws from ``rng`` at most, so the draw stays cheap
     and episodes stay a function of the seed.

@@ -12,6 +12,9 @@ from typing import ClassVar
 
 import numpy as np
 
+from lanrocli import choices
+from lanrocli.sim import action_size
+
 REACH_STILL = 0.025
 """Reach on an object counts only while that object is within this distance (m) of its start."""
 
@@ -43,8 +46,12 @@ class TaskView:
 class Task:
     """A task: whether the arm uses its gripper, per-episode parameters, and the condition C_T."""
 
-    name: ClassVar[str]
+    name: ClassVar[choices.Task]
     gripper: ClassVar[bool] = False
+
+    @property
+    def action_size(self) -> int:
+        return action_size(self.gripper)
 
     def reset(self, rng: np.random.Generator) -> None:
         """Sample this episode's parameters (distances, heights)."""
@@ -62,7 +69,7 @@ class Reach(Task):
     episodes were lost.)
     """
 
-    name = "reach"
+    name = choices.Task.REACH
 
     def achieved(self, view: TaskView) -> np.ndarray:
         moved = np.linalg.norm(view.positions - view.start_positions, axis=1)
@@ -73,7 +80,7 @@ class Reach(Task):
 class Push(Task):
     """The object slid farther than this episode's distance, without being lifted or tipped over."""
 
-    name = "push"
+    name = choices.Task.PUSH
 
     def __init__(self) -> None:
         self.distance = PUSH_DISTANCE[0]
@@ -95,7 +102,7 @@ def held(view: TaskView) -> np.ndarray:
 
 
 class Grasp(Task):
-    name = "grasp"
+    name = choices.Task.GRASP
     gripper = True
 
     def achieved(self, view: TaskView) -> np.ndarray:
@@ -105,7 +112,7 @@ class Grasp(Task):
 class Lift(Task):
     """Held, and raised above this episode's height."""
 
-    name = "lift"
+    name = choices.Task.LIFT
     gripper = True
 
     def __init__(self) -> None:
@@ -119,10 +126,10 @@ class Lift(Task):
         return held(view) & (raised > self.height)
 
 
-TASK_CLASSES: dict[str, type[Task]] = {cls.name: cls for cls in (Reach, Push, Grasp, Lift)}
+TASK_CLASSES: dict[choices.Task, type[Task]] = {cls.name: cls for cls in (Reach, Push, Grasp, Lift)}
 
 
 def make_task(name: str) -> Task:
     if name not in TASK_CLASSES:
-        raise ValueError(f"task must be one of {sorted(TASK_CLASSES)}, got {name!r}")
-    return TASK_CLASSES[name]()
+        raise ValueError(f"task must be one of {[task.value for task in choices.Task]}, got {name!r}")
+    return TASK_CLASSES[choices.Task(name)]()

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from lanrocli.choices import Task
+
 COLOURS: tuple[str, ...] = ("red", "green", "blue", "yellow", "purple", "orange", "pink", "cyan", "brown")
 
 # One rare word per colour for the "lack of common ground" case: a word that names the colour but that
@@ -34,7 +36,7 @@ SHAPE_WORDS: dict[str, tuple[str, ...]] = {
     "cylinder": ("cylinder", "barrel", "tophat"),
 }
 
-TASKS: tuple[str, ...] = ("reach", "push", "grasp", "lift")
+TASKS: tuple[str, ...] = tuple(task.value for task in Task)
 
 TASK_VERBS: dict[str, tuple[str, ...]] = {
     "reach": ("reach", "touch", "contact"),
@@ -56,6 +58,15 @@ class ObjectProps:
             raise ValueError(f"unknown colour {self.colour!r}; expected one of {', '.join(COLOURS)}")
         if self.shape not in SHAPES:
             raise ValueError(f"unknown shape {self.shape!r}; expected one of {', '.join(SHAPES)}")
+
+    @property
+    def indices(self) -> tuple[int, int]:
+        """The colour's index in ``COLOURS`` and the shape's in ``SHAPES``: the object as numbers."""
+        return COLOURS.index(self.colour), SHAPES.index(self.shape)
+
+    @classmethod
+    def from_indices(cls, colour: int, shape: int) -> ObjectProps:
+        return cls(COLOURS[colour], SHAPES[shape])
 
     def shared_properties(self, other: ObjectProps) -> int:
         """How many properties (0, 1 or 2) this object has in common with ``other``."""

@@ -31,6 +31,7 @@ from lanrocli.sim.panda import (
     Contacts,
     Panda,
     RobotState,
+    action_size,
 )
 from lanrocli.sim.world import World
 
@@ -59,5 +60,6 @@ __all__ = [
     "ShapeSpec",
     "SimObject",
     "World",
+    "action_size",
     "resting_position",
 ]

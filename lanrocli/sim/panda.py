@@ -108,6 +108,11 @@ def _read_only(array: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     return array
 
 
+def action_size(gripper: bool) -> int:
+    """Length of the action vector: the hand's displacement (dx, dy, dz), and the finger opening with the gripper."""
+    return 4 if gripper else 3
+
+
 class Panda:
     """A fixed-base Panda on the table, controlled by Cartesian end-effector steps.
 
@@ -162,8 +167,7 @@ class Panda:
 
     @property
     def action_size(self) -> int:
-        """Length of the action vector: 3, or 4 with the gripper."""
-        return 4 if self._gripper else 3
+        return action_size(self._gripper)
 
     def reset(self, finger_width: float = 0.0, ee_position: npt.ArrayLike | None = None) -> None:
         """Put the arm at rest in the neutral pose, or pointing down with its end effector at

@@ -1,6 +1,5 @@
-"""Training: vectorised collection, the stage loop, evaluation, checkpoints and resume."""
+"""Training: vectorised collection, the stage loop, evaluation, checkpoints and resume.
 
-from lanrocli.train.checkpoint import CheckpointError
-from lanrocli.train.trainer import AgentPolicy, Trainer, TrainSettings, pick_device
-
-__all__ = ["AgentPolicy", "CheckpointError", "TrainSettings", "Trainer", "pick_device"]
+Import from the modules themselves: this package loads nothing, so reading a run folder (plotting, say)
+starts neither torch nor pybullet.
+"""

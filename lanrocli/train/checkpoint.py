@@ -1,10 +1,13 @@
 """Checkpoints as data: tensors in a weights-only torch file, everything else in JSON and numpy archives.
 
-A checkpoint is a directory written under a temporary name, every file fsynced, then renamed into place;
-only after that does the small ``latest`` pointer file change, again by an atomic rename. A kill at any
-moment therefore leaves the previous checkpoint and the pointer to it whole. Loading uses
-``torch.load(weights_only=True)`` and ``np.load(allow_pickle=False)``, so a file from a stranger cannot
-run code.
+Everything a checkpoint holds is one :class:`Checkpoint`, and this module alone turns it into files and
+back, so what a checkpoint contains is written down in one place. A checkpoint is a directory written under
+a temporary name, every file fsynced, then renamed into place; the pointers that name it change only after
+that (see :mod:`lanrocli.train.runfolder`). Loading uses ``torch.load(weights_only=True)`` and
+``np.load(allow_pickle=False)``, so a file from a stranger cannot run code.
+
+Files written by older versions load too: their ``state.json`` also holds ``agent_settings``, a second copy
+of the settings that ``agent.pt`` holds, which is ignored.
 """
 
 from __future__ import annotations
@@ -13,52 +16,180 @@ import json
 import os
 import pickle
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
 
-from lanrocli.agent import ReplayBuffer
+from lanrocli.agent import ReplayBuffer, SACSettings
+from lanrocli.train.runfolder import LATEST, CheckpointError, fsync_dir, fsync_file, read_pointer, temporary
 
 AGENT_FILE = "agent.pt"
 BUFFER_FILE = "buffer.npz"
 STATE_FILE = "state.json"
 PARTIAL_FILE = "partial.npz"
-LATEST = "latest"
-TMP_PREFIX = ".tmp-"
 
 
-class CheckpointError(RuntimeError):
-    """A checkpoint is missing, incomplete, or not plain data."""
+@dataclass
+class Checkpoint:
+    """Everything a checkpoint holds. Without ``buffer``, ``partials`` and ``environments`` it holds the
+    agent and the state only: enough to evaluate, a fraction of the size, but nothing to resume from."""
+
+    agent: dict[str, Any]
+    """The agent's state dict, which holds the only saved copy of the agent's settings."""
+    train_settings: dict[str, Any]
+    vocabulary: dict[str, Any]
+    progress: dict[str, Any]
+    rng: dict[str, Any]
+    """The state of the trainer's sampling generator, as numpy's bit generator gives it."""
+    wall_time: float
+    extra: dict[str, Any]
+    """The caller's plain data (a curriculum's position)."""
+    buffer: ReplayBuffer | None = None
+    partials: list[dict[str, np.ndarray]] | None = None
+    """Each environment's unfinished episode as arrays."""
+    environments: list[dict[str, Any]] | None = None
+    """Each environment's snapshot, to rebuild it mid-episode."""
+
+    def __post_init__(self) -> None:
+        if len({part is None for part in (self.buffer, self.partials, self.environments)}) > 1:
+            raise ValueError("a checkpoint holds its buffer, partial episodes and environments together or none")
+
+    @property
+    def agent_settings(self) -> SACSettings:
+        return SACSettings.from_dict(self.agent["settings"])
 
 
-def _fsync_file(path: Path) -> None:
-    with open(path, "rb") as f:
-        os.fsync(f.fileno())
+def state_to_json(state: dict[str, Any]) -> dict[str, Any]:
+    """A numpy bit-generator state for JSON: its 128-bit integers become strings, which every reader keeps."""
+    return {k: state_to_json(v) if isinstance(v, dict) else (str(v) if isinstance(v, int) else v) for k, v in state.items()}
 
 
-def _fsync_dir(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
+def state_from_json(state: dict[str, Any]) -> dict[str, Any]:
+    return {
+        k: state_from_json(v) if isinstance(v, dict) else (int(v) if isinstance(v, str) and v.lstrip("-").isdigit() else v)
+        for k, v in state.items()
+    }
+
+
+# -- writing -----------------------------------------------------------------------------------------------
+
+
+def save_checkpoint(directory: Path, contents: Checkpoint) -> Path:
+    """Write ``contents`` as a checkpoint at ``directory`` (which must not exist yet) and return it."""
+    if directory.exists():
+        raise CheckpointError(f"checkpoint {directory} exists already; checkpoints are never overwritten")
+    directory.parent.mkdir(parents=True, exist_ok=True)
+    tmp = temporary(directory)
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir()
+    torch.save(contents.agent, tmp / AGENT_FILE)
+    (tmp / STATE_FILE).write_text(json.dumps(_plain_state(contents), indent=1))
+    names = [AGENT_FILE, STATE_FILE]
+    if contents.buffer is not None and contents.partials is not None:
+        _write_buffer(tmp / BUFFER_FILE, contents.buffer)
+        _write_partials(tmp / PARTIAL_FILE, contents.partials)
+        names += [BUFFER_FILE, PARTIAL_FILE]
+    for name in names:
+        fsync_file(tmp / name)
+    fsync_dir(tmp)
+    os.replace(tmp, directory)
+    fsync_dir(directory.parent)
+    return directory
+
+
+def _plain_state(contents: Checkpoint) -> dict[str, Any]:
+    """What ``state.json`` holds: everything but the agent and the arrays."""
+    state = {
+        "train_settings": contents.train_settings,
+        "vocabulary": contents.vocabulary,
+        "progress": contents.progress,
+        "rng": state_to_json(contents.rng),
+        "wall_time": contents.wall_time,
+        "extra": contents.extra,
+    }
+    if contents.environments is not None:
+        state["environments"] = contents.environments
+    return state
+
+
+def _write_buffer(path: Path, buffer: ReplayBuffer) -> None:
+    meta, arrays = buffer.state()
+    with open(path, "wb") as f:
+        np.savez_compressed(f, meta=np.array(json.dumps(meta)), **arrays)
+
+
+def _write_partials(path: Path, partials: list[dict[str, np.ndarray]]) -> None:
+    arrays = {f"{i}/{key}": value for i, partial in enumerate(partials) for key, value in partial.items()}
+    with open(path, "wb") as f:
+        np.savez(f, **arrays)
+
+
+# -- reading -----------------------------------------------------------------------------------------------
+
+
+def load_checkpoint(directory: Path, device: str | torch.device = "cpu", resumable: bool = True) -> Checkpoint:
+    """The checkpoint at ``directory``; with ``resumable`` all of it, and an error if it cannot be resumed
+    from, else its agent and state only (the buffer, which may be large, is not read)."""
+    if resumable:
+        missing = [n for n in (AGENT_FILE, BUFFER_FILE, STATE_FILE, PARTIAL_FILE) if not (directory / n).is_file()]
+        if missing:
+            raise CheckpointError(
+                f"{directory} cannot be resumed from: missing {', '.join(missing)} "
+                "(a 'best' checkpoint holds the agent only, for evaluation)"
+            )
+    state = _load_state(directory)
+    return Checkpoint(
+        agent=load_agent_state(directory, device),
+        train_settings=state["train_settings"],
+        vocabulary=state["vocabulary"],
+        progress=state["progress"],
+        rng=state_from_json(state["rng"]),
+        wall_time=float(state["wall_time"]),
+        extra=state["extra"],
+        buffer=_read_buffer(directory / BUFFER_FILE) if resumable else None,
+        partials=_read_partials(directory / PARTIAL_FILE) if resumable else None,
+        environments=state["environments"] if resumable else None,
+    )
+
+
+def load_agent_state(directory: Path, device: str | torch.device = "cpu") -> dict[str, Any]:
+    """The agent's tensors and plain data; refuses a file that would need to unpickle objects."""
+    path = directory / AGENT_FILE
+    if not path.is_file():
+        raise CheckpointError(f"{directory} is not a checkpoint: {AGENT_FILE} is missing")
     try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+        return torch.load(path, map_location=device, weights_only=True)
+    except pickle.UnpicklingError as error:
+        raise CheckpointError(
+            f"{path} holds Python objects other than tensors and plain data, so it was not loaded "
+            f"(loading it could run code). Only checkpoints written by lanro are accepted. Detail: {error}"
+        ) from None
 
 
-def write_pointer(pointer: Path, target: str) -> None:
-    """Point ``pointer`` (a small text file) at ``target`` atomically."""
-    tmp = pointer.with_name(f"{TMP_PREFIX}{pointer.name}")
-    tmp.write_text(target + "\n")
-    _fsync_file(tmp)
-    os.replace(tmp, pointer)
-    _fsync_dir(pointer.parent)
+def _load_state(directory: Path) -> dict[str, Any]:
+    path = directory / STATE_FILE
+    if not path.is_file():
+        raise CheckpointError(f"{directory} is not a checkpoint: {STATE_FILE} is missing")
+    return json.loads(path.read_text())
 
 
-def read_pointer(pointer: Path) -> Path:
-    if not pointer.is_file():
-        raise CheckpointError(f"no checkpoint pointer at {pointer}")
-    return pointer.parent / pointer.read_text().strip()
+def _read_buffer(path: Path) -> ReplayBuffer:
+    # The open archive is handed over as it is, so each array is read only as the buffer copies it in.
+    with np.load(path, allow_pickle=False) as archive:
+        return ReplayBuffer.from_state(json.loads(str(archive["meta"])), archive)
+
+
+def _read_partials(path: Path) -> list[dict[str, np.ndarray]]:
+    partials: dict[int, dict[str, np.ndarray]] = {}
+    with np.load(path, allow_pickle=False) as archive:
+        for name in archive.files:
+            index, key = name.split("/", 1)
+            partials.setdefault(int(index), {})[key] = archive[name]
+    return [partials[i] for i in sorted(partials)]
 
 
 def resolve_checkpoint(path: Path) -> Path:
@@ -76,89 +207,3 @@ def resolve_checkpoint(path: Path) -> Path:
         f"{path} is neither a checkpoint (a directory with {AGENT_FILE}), a pointer file such as 'latest', "
         f"nor a run folder with a '{LATEST}' pointer"
     )
-
-
-def save_checkpoint(
-    directory: Path,
-    agent_state: dict[str, Any],
-    buffer: ReplayBuffer | None,
-    state: dict[str, Any],
-    partials: list[dict[str, np.ndarray]] | None,
-) -> Path:
-    """Write a checkpoint at ``directory`` (which must not exist yet) and return it.
-
-    Without ``buffer`` and ``partials`` it holds the agent and the state only: enough to evaluate, not to
-    resume."""
-    if directory.exists():
-        raise CheckpointError(f"checkpoint {directory} exists already; checkpoints are never overwritten")
-    directory.parent.mkdir(parents=True, exist_ok=True)
-    tmp = directory.with_name(f"{TMP_PREFIX}{directory.name}")
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    tmp.mkdir()
-    torch.save(agent_state, tmp / AGENT_FILE)
-    (tmp / STATE_FILE).write_text(json.dumps(state, indent=1))
-    names = [AGENT_FILE, STATE_FILE]
-    if buffer is not None and partials is not None:
-        buffer.save(tmp / BUFFER_FILE)
-        arrays = {f"{i}/{key}": value for i, partial in enumerate(partials) for key, value in partial.items()}
-        with open(tmp / PARTIAL_FILE, "wb") as f:
-            np.savez(f, **arrays)
-        names += [BUFFER_FILE, PARTIAL_FILE]
-    for name in names:
-        _fsync_file(tmp / name)
-    _fsync_dir(tmp)
-    os.replace(tmp, directory)
-    _fsync_dir(directory.parent)
-    return directory
-
-
-def load_agent_state(directory: Path, device: str | torch.device = "cpu") -> dict[str, Any]:
-    """The agent's tensors and plain data; refuses a file that would need to unpickle objects."""
-    path = directory / AGENT_FILE
-    if not path.is_file():
-        raise CheckpointError(f"{directory} is not a checkpoint: {AGENT_FILE} is missing")
-    try:
-        return torch.load(path, map_location=device, weights_only=True)
-    except pickle.UnpicklingError as error:
-        raise CheckpointError(
-            f"{path} holds Python objects other than tensors and plain data, so it was not loaded "
-            f"(loading it could run code). Only checkpoints written by lanro are accepted. Detail: {error}"
-        ) from None
-
-
-def load_state(directory: Path) -> dict[str, Any]:
-    """The plain data of a checkpoint: settings, counters, random states."""
-    path = directory / STATE_FILE
-    if not path.is_file():
-        raise CheckpointError(f"{directory} is not a checkpoint: {STATE_FILE} is missing")
-    return json.loads(path.read_text())
-
-
-def load_checkpoint(
-    directory: Path, device: str | torch.device = "cpu"
-) -> tuple[dict[str, Any], ReplayBuffer, dict[str, Any], list[dict[str, np.ndarray]]]:
-    """Everything a resumable checkpoint holds: agent state, replay buffer, state, unfinished episodes."""
-    missing = [n for n in (AGENT_FILE, BUFFER_FILE, STATE_FILE, PARTIAL_FILE) if not (directory / n).is_file()]
-    if missing:
-        raise CheckpointError(
-            f"{directory} cannot be resumed from: missing {', '.join(missing)} "
-            "(a 'best' checkpoint holds the agent only, for evaluation)"
-        )
-    agent_state = load_agent_state(directory, device)
-    buffer = ReplayBuffer.load(directory / BUFFER_FILE)
-    state = load_state(directory)
-    partials: dict[int, dict[str, np.ndarray]] = {}
-    with np.load(directory / PARTIAL_FILE, allow_pickle=False) as archive:
-        for name in archive.files:
-            index, key = name.split("/", 1)
-            partials.setdefault(int(index), {})[key] = archive[name]
-    return agent_state, buffer, state, [partials[i] for i in sorted(partials)]
-
-
-def prune(directory: Path, keep: set[Path]) -> None:
-    """Remove checkpoint directories under ``directory`` except ``keep``, and stale temporary ones."""
-    kept = {k.resolve() for k in keep}
-    for child in directory.iterdir():
-        if child.is_dir() and child.resolve() not in kept:
-            shutil.rmtree(child, ignore_errors=True)

@@ -21,8 +21,9 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
 
 from lanrocli.agent import EpisodeData
-from lanrocli.envs import LanroEnv
-from lanrocli.language import COLOURS, SHAPES
+from lanrocli.envs.env import LanroEnv
+from lanrocli.language import ObjectProps
+from lanrocli.train.checkpoint import state_from_json, state_to_json
 
 
 @dataclass(frozen=True)
@@ -38,18 +39,6 @@ class EnvSnapshot:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> EnvSnapshot:
         return cls(state_from_json(data["start_state"]), [list(map(float, a)) for a in data["actions"]])
-
-
-def state_to_json(state: dict[str, Any]) -> dict[str, Any]:
-    """A numpy bit-generator state for JSON: its 128-bit integers become strings, which every reader keeps."""
-    return {k: state_to_json(v) if isinstance(v, dict) else (str(v) if isinstance(v, int) else v) for k, v in state.items()}
-
-
-def state_from_json(state: dict[str, Any]) -> dict[str, Any]:
-    return {
-        k: state_from_json(v) if isinstance(v, dict) else (int(v) if isinstance(v, str) and v.lstrip("-").isdigit() else v)
-        for k, v in state.items()
-    }
 
 
 class TrainingEnv(gym.Wrapper):
@@ -94,8 +83,9 @@ class TrainingEnv(gym.Wrapper):
         return obs, flat
 
     def _flat_reset(self, info: dict[str, Any]) -> dict[str, Any]:
-        """The objects stay the same all episode: turn their words into indices once."""
-        self._objects = np.array([(COLOURS.index(c), SHAPES.index(s)) for c, s in info["objects"]], dtype=np.int64)
+        """The objects stay the same all episode, and the vector API stacks arrays: they travel as their
+        indices, computed once per episode."""
+        self._objects = np.array([o.indices for o in info["objects"]], dtype=np.int64)
         return self._flat(info)
 
     def _flat(self, info: dict[str, Any]) -> dict[str, Any]:
@@ -104,7 +94,6 @@ class TrainingEnv(gym.Wrapper):
             "goal_index": int(info["goal_index"]),
             "objects": self._objects,
             "is_success": bool(info["is_success"]),
-            "challenge": info["challenge"] or "",
         }
 
 
@@ -113,7 +102,7 @@ class _Partial:
     """The steps of one environment's episode so far."""
 
     goal_index: int
-    objects: np.ndarray
+    objects: tuple[ObjectProps, ...]
     observations: list[np.ndarray] = field(default_factory=list)
     instructions: list[np.ndarray] = field(default_factory=list)
     next_observations: list[np.ndarray] = field(default_factory=list)
@@ -134,7 +123,7 @@ class _Partial:
             terminated=np.asarray(self.terminated, dtype=bool),
             achieved=np.stack(self.achieved),
             goal_index=self.goal_index,
-            objects=[(COLOURS[c], SHAPES[s]) for c, s in self.objects],
+            objects=self.objects,
             task=task,
         )
 
@@ -143,7 +132,6 @@ class _Partial:
 class FinishedEpisode:
     data: EpisodeData
     success: bool
-    challenge: str
 
 
 class Collector:
@@ -190,7 +178,8 @@ class Collector:
 
     @staticmethod
     def _new_partial(info: dict[str, Any], i: int) -> _Partial:
-        return _Partial(goal_index=int(info["goal_index"][i]), objects=np.asarray(info["objects"][i]))
+        objects = tuple(ObjectProps.from_indices(colour, shape) for colour, shape in info["objects"][i])
+        return _Partial(goal_index=int(info["goal_index"][i]), objects=objects)
 
     @property
     def observation(self) -> dict[str, np.ndarray]:
@@ -259,13 +248,7 @@ class Collector:
             p.terminated.append(bool(terminated[i]))
             p.achieved.append(np.asarray(step_info["achieved"][i], dtype=bool))
             if ended:
-                finished.append(
-                    FinishedEpisode(
-                        p.episode(self.task),
-                        bool(step_info["is_success"][i]),
-                        str(step_info["challenge"][i]),
-                    )
-                )
+                finished.append(FinishedEpisode(p.episode(self.task), bool(step_info["is_success"][i])))
                 self._partials[i] = self._new_partial(info, i)
         self._obs = obs
         return finished

@@ -1,18 +1,5 @@
 """A curriculum run: its stages one after another, evaluated as they go, promoted by their rules.
 
-The run folder holds everything a researcher looks at or resumes from::
-
-    config.yaml                  the resolved curriculum; --resume refuses a curriculum that differs
-    metrics.csv                  one row per evaluation
-    report.md                    the per-stage table, rewritten whenever a stage ends
-    latest                       pointer to the newest checkpoint
-    stage-K-NAME/step-N/         the stage's newest resumable checkpoint (agent, buffer, environments)
-    stage-K-NAME/best-N/         the agent of the stage's best evaluation (agent and state only)
-    stage-K-NAME/last, best      pointers to those two
-    events.*                     TensorBoard scalars, when the tensorboard package is installed
-
-    stage-K-NAME/test.json       the stage's last and best agents on its held-out test episodes
-
 Within a stage, evaluation happens every ``eval.every`` environment steps counted from the stage's start
 and when its budget is spent, each time on fresh episodes. After each evaluation the stage's promotion
 rule is checked on the episodes of its last ``patience`` evaluations pooled (their success rate, or the
@@ -22,15 +9,13 @@ stage ends, its ``last`` and ``best`` agents are measured on the stage's test ep
 the run selects on; ``report.md`` quotes those figures. A checkpoint follows every evaluation and every
 interruption, so a resumed run repeats nothing and skips nothing: it ends with the same stages, step
 counts and, on CPU, the same numbers as a run that was never stopped.
+
+What the run writes, and where, is :mod:`lanrocli.train.runfolder`'s business.
 """
 
 from __future__ import annotations
 
-import csv
 import dataclasses
-import json
-import math
-import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,30 +23,33 @@ from typing import Any
 
 import torch
 
-from lanrocli.envs.evaluation import METRIC_NAMES, EvaluationReport, Instruction, Rate, wilson_interval
-from lanrocli.envs.instructor import Kind
-from lanrocli.train.checkpoint import LATEST, CheckpointError, prune, read_pointer, write_pointer
+from lanrocli.choices import Instruction
+from lanrocli.envs.evaluation import EvaluationReport, Rate, wilson_interval
 from lanrocli.train.curriculum import Curriculum, Promote, Stage, diff_curricula, load_curriculum
+from lanrocli.train.runfolder import (
+    AGENT_METRICS,
+    BEST,
+    CONFIG,
+    LANGUAGE,
+    LAST,
+    LATEST,
+    METRICS,
+    TEST,
+    CheckpointError,
+    TensorBoard,
+    append_metrics,
+    best_checkpoint,
+    publish,
+    read_pointer,
+    stage_folder,
+    step_checkpoint,
+    truncate_metrics,
+    write_json,
+    write_report,
+)
 from lanrocli.train.seeds import evaluation_seed
 from lanrocli.train.testset import measure
 from lanrocli.train.trainer import Trainer, TrainSettings
-
-CONFIG = "config.yaml"
-METRICS = "metrics.csv"
-REPORT = "report.md"
-TEST = "test.json"
-BEST = "best"
-LAST = "last"
-LANGUAGE = "language"
-"""Key of ``test.json`` under which the last stage's final agent is measured with each ``Instruction``."""
-
-AGENT_METRICS = (
-    "critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy"
-)
-METRIC_COLUMNS = (
-    "stage", "stage_name", "env_steps", "stage_steps", "wall_time", *METRIC_NAMES, "mean_return", "mean_length",
-    "train_success", "rule_value", "rule_holds", *AGENT_METRICS,
-)
 
 
 class RunError(RuntimeError):
@@ -129,10 +117,6 @@ class RunObserver:
     def on_stage_end(self, run: CurriculumRun, result: StageResult) -> None: ...
 
 
-def stage_folder(index: int, stage: Stage) -> str:
-    return f"stage-{index + 1}-{stage.name}"
-
-
 def watched(stage: Stage, report: EvaluationReport) -> Rate:
     """The episodes the stage's rule watches (all of them without a rule)."""
     return report.corrected if stage.promote is not None and stage.promote.on == "corrected" else report.overall
@@ -159,7 +143,7 @@ class CurriculumRun:
         self.trainer = trainer
         self.state = state
         self.observer = observer or RunObserver()
-        self._tensorboard = _TensorBoard.open(out, purge_step=trainer.progress.env_steps)
+        self._tensorboard = TensorBoard.open(out, purge_step=trainer.progress.env_steps)
         if not state.finished and trainer.settings.stage != state.stage:
             # The checkpoint was written as its stage ended: the next stage starts from here.
             self._enter(state.stage)
@@ -180,7 +164,7 @@ class CurriculumRun:
         first = curriculum.stages[0]
         settings = TrainSettings(
             task=curriculum.task,
-            env=first.env.env_kwargs(),
+            env=first.env.settings(),
             seed=curriculum.seed,
             envs=curriculum.envs,
             eval_episodes=curriculum.eval.episodes,
@@ -218,7 +202,7 @@ class CurriculumRun:
             raise RunError(f"{out} has no checkpoint yet (the run stopped before its first one); start it again") from None
         trainer, extra = Trainer.load(directory, device)
         state = RunState.from_dict(extra["run"])
-        _truncate_metrics(out / METRICS, trainer.progress.env_steps)
+        truncate_metrics(out / METRICS, trainer.progress.env_steps)
         return cls(saved, out, trainer, state, observer)
 
     # -- running -----------------------------------------------------------------------------------------
@@ -258,7 +242,7 @@ class CurriculumRun:
         if improved:
             state.best = score
         row = self._row(stage, report, value, holds)
-        _append_row(self.out / METRICS, row)
+        append_metrics(self.out / METRICS, row)
         self._tensorboard.write(row)
         self.observer.on_evaluation(self, row)
 
@@ -306,8 +290,8 @@ class CurriculumRun:
                 shown.value: measure(folder / LAST, episodes, device, plain, instruction=shown).record
                 for shown in Instruction
             }
-        _write_json(folder / TEST, record)
-        self._write_report()
+        write_json(folder / TEST, record)
+        write_report(self.out, self.curriculum, self.state)
 
     def complete_tests(self) -> None:
         """Measure stages that ended but were not measured yet: a run killed while testing does it on resume."""
@@ -317,7 +301,7 @@ class CurriculumRun:
                 self._test(result)
 
     def _enter(self, index: int) -> None:
-        self.trainer.enter_stage(self.curriculum.stages[index].env.env_kwargs(), index)
+        self.trainer.enter_stage(self.curriculum.stages[index].env.settings(), index)
 
     def _row(self, stage: Stage, report: EvaluationReport, value: float | None, holds: bool) -> dict[str, Any]:
         progress = self.trainer.progress
@@ -347,189 +331,12 @@ class CurriculumRun:
         folder = self.out / stage_folder(stage_index, self.curriculum.stages[stage_index])
         steps = self.trainer.progress.env_steps
         extra = {"run": self.state.to_dict()}
-        last = folder / f"step-{steps:010d}"
+        last = folder / step_checkpoint(steps)
         if not last.exists():  # an interruption right after an evaluation finds its checkpoint written
             self.trainer.save(last, extra)
-        if best:
-            self.trainer.save(folder / f"best-{steps:010d}", extra, resumable=False)
-            write_pointer(folder / BEST, f"best-{steps:010d}")
-        write_pointer(folder / LAST, last.name)
-        write_pointer(self.out / LATEST, f"{folder.name}/{last.name}")
-        keep = {last}
-        if (folder / BEST).is_file():
-            keep.add(read_pointer(folder / BEST))
-        prune(folder, keep)
-
-    def _write_report(self) -> None:
-        (self.out / REPORT).write_text(render_report(self.curriculum, self.state, self.out))
+        best_agent = self.trainer.save(folder / best_checkpoint(steps), extra, resumable=False) if best else None
+        publish(self.out, last, best_agent)
 
     def close(self) -> None:
         self.trainer.close()
         self._tensorboard.close()
-
-
-def _percent(value: float | None) -> str:
-    return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{100 * value:.0f}%"
-
-
-def _with_interval(rate: dict[str, Any]) -> str:
-    """A rate of a ``test.json`` record as ``92.0% [89.3, 94.1] (n)``, or ``-`` without episodes."""
-    if not rate["episodes"]:
-        return "-"
-    low, high = rate["ci"]
-    return f"{100 * rate['success']:.1f}% [{100 * low:.1f}, {100 * high:.1f}] ({rate['episodes']})"
-
-
-def _with_count(rate: dict[str, Any] | None) -> str:
-    return "-" if not rate or not rate["episodes"] else f"{100 * rate['success']:.0f}% ({rate['episodes']})"
-
-
-def _test_rows(index: int, name: str, record: dict[str, Any]) -> list[str]:
-    rows = []
-    for agent in (LAST, BEST):
-        if agent not in record:
-            continue
-        r = record[agent]
-        overall = {"episodes": r["episodes"], "success": r["success"], "ci": r["success_ci"]}
-        episodes = {
-            "episodes": r["correction_episodes"],
-            "success": r["correction_episode_success"],
-            "ci": r["correction_episode_success_ci"],
-        }
-        kinds = [_with_count(r["by_kind"].get(kind.value, {}).get("corrected")) for kind in Kind]
-        rows.append(
-            f"| {index + 1}. {name} | {agent} ({r['checkpoint'].split('/')[-1]}) | {_with_interval(overall)} | "
-            f"{_with_interval(episodes)} | {_with_interval(r['corrected'])} | {' | '.join(kinds)} | "
-            f"{_with_count(r['by_negation']['with_negation'])} |"
-        )
-    return rows
-
-
-def render_report(curriculum: Curriculum, state: RunState, out: Path) -> str:
-    """``report.md``: how each stage went, and its agents on held-out test episodes, in Markdown."""
-    lines = [
-        f"# {curriculum.name}: {curriculum.task}",
-        "",
-        f"Seed {curriculum.seed}, {curriculum.envs} environments; evaluation on {curriculum.eval.episodes} fresh "
-        f"episodes every {curriculum.eval.every:,} steps; each stage's agents tested on "
-        f"{curriculum.test.episodes} held-out episodes.",
-        "",
-        "## Stages",
-        "",
-        "| stage | rule | steps | ended | evaluations | rule's value at the end | wall time |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for result in state.results:
-        stage = curriculum.stages[result.index]
-        rule = "-"
-        if stage.promote:
-            p = stage.promote
-            rule = f"{p.on} {'>=' if p.statistic == 'mean' else 'lower bound >='} {p.success:g}, {p.patience} pooled"
-        lines.append(
-            f"| {result.index + 1}. {result.name} | {rule} | {result.end - result.start:,} of "
-            f"{stage.budget.steps:,} | {result.ended} | {result.evaluations} | {_percent(result.rule_value)} | "
-            f"{result.wall_time / 60:.1f} min |"
-        )
-    total = state.results[-1].end if state.results else 0
-    status = "finished" if state.finished else "running"
-    if state.stopped_early:
-        status = "stopped: a budget ran out with on_budget: stop"
-    lines += ["", f"Status: {status}. {total:,} environment steps in all. (Wall time is cumulative.)"]
-
-    tests = {}
-    for result in state.results:
-        path = out / stage_folder(result.index, curriculum.stages[result.index]) / TEST
-        if path.is_file():
-            tests[result.index] = (result.name, json.loads(path.read_text()))
-    if tests:
-        lines += [
-            "",
-            "## Test: held-out episodes",
-            "",
-            "Success with 95% Wilson interval (episodes). Nothing in the run was selected on these episodes. "
-            "Per kind and after a negation: success on the episodes in which that correction was spoken.",
-            "",
-            "| stage | agent | success | correction episodes | corrected | ambiguity | common ground | "
-            "instruction correction | wrong object | after a negation |",
-            "|---|---|---|---|---|---|---|---|---|---|",
-        ]
-        for index, (name, record) in tests.items():
-            lines += _test_rows(index, name, record)
-        language = next((record[LANGUAGE] for _, record in reversed(tests.values()) if LANGUAGE in record), None)
-        if language:
-            lines += [
-                "",
-                "## Language check: the final agent on plain test episodes",
-                "",
-                "`true`: the instructor's sentence; `blank`: no words; `other`: a sentence naming another object, "
-                "won when the task holds for that object. An agent that reads its instruction is near chance "
-                "with `blank` and about as good with `other` as with `true`.",
-                "",
-                "| instruction | success |",
-                "|---|---|",
-            ]
-            for shown, r in language.items():
-                overall = {"episodes": r["episodes"], "success": r["success"], "ci": r["success_ci"]}
-                lines.append(f"| {shown} | {_with_interval(overall)} |")
-    return "\n".join(lines) + "\n"
-
-
-def _write_json(path: Path, data: dict[str, Any]) -> None:
-    """Write ``path`` whole or not at all: a kill mid-write leaves the old file or none."""
-    tmp = path.with_name(f".tmp-{path.name}")
-    tmp.write_text(json.dumps(data, indent=1))
-    os.replace(tmp, path)
-
-
-def _append_row(path: Path, row: dict[str, Any]) -> None:
-    new = not path.exists()
-    with open(path, "a", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=METRIC_COLUMNS)
-        if new:
-            writer.writeheader()
-        writer.writerow(row)
-
-
-def _truncate_metrics(path: Path, env_steps: int) -> None:
-    """Drop rows written after the checkpoint a run resumes from: the resumed run writes them again."""
-    if not path.is_file():
-        return
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    kept = [r for r in rows if int(r["env_steps"]) <= env_steps]
-    if len(kept) == len(rows):
-        return
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=METRIC_COLUMNS)
-        writer.writeheader()
-        writer.writerows(kept)
-    tmp.replace(path)
-
-
-class _TensorBoard:
-    """Evaluation scalars as TensorBoard events when the optional ``tensorboard`` package is installed."""
-
-    def __init__(self, writer: Any) -> None:
-        self._writer = writer
-
-    @classmethod
-    def open(cls, out: Path, purge_step: int) -> _TensorBoard:
-        try:
-            from torch.utils.tensorboard import SummaryWriter
-        except ImportError:
-            return cls(None)
-        # purge_step drops events a killed run wrote after the checkpoint it resumes from.
-        return cls(SummaryWriter(str(out), purge_step=purge_step or None))
-
-    def write(self, row: dict[str, Any]) -> None:
-        if self._writer is None:
-            return
-        for name, value in row.items():
-            if isinstance(value, (int, float)) and name != "env_steps":
-                self._writer.add_scalar(f"eval/{name}", value, row["env_steps"])
-        self._writer.flush()
-
-    def close(self) -> None:
-        if self._writer is not None:
-            self._writer.close()

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lanrocli.train.pipeline import METRICS
+from lanrocli.train.runfolder import METRICS
 
 PANELS = (("success", "all episodes"), ("corrected_success", "episodes with a spoken correction"))
 OLD_COLUMNS = {"corrected_success": "correction_success"}

@@ -14,8 +14,10 @@ from typing import Any
 
 import torch
 
-from lanrocli.envs import LanroEnv
-from lanrocli.envs.evaluation import EvaluationReport, Instruction, evaluate, evaluation_settings
+from lanrocli.choices import Instruction
+from lanrocli.envs.env import LanroEnv
+from lanrocli.envs.evaluation import EvaluationReport, evaluate
+from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.checkpoint import resolve_checkpoint
 from lanrocli.train.seeds import held_out_seed
 from lanrocli.train.trainer import TrainSettings, load_policy
@@ -26,7 +28,7 @@ class Measurement:
     """What one measurement of a checkpoint found, and the record of it for files and ``--json``."""
 
     settings: TrainSettings
-    env: dict[str, Any]
+    env: EnvSettings
     first_seed: int
     held_out: bool
     report: EvaluationReport
@@ -47,24 +49,22 @@ def measure(
     instruction: Instruction = Instruction.TRUE,
     gif: Path | None = None,
     progress: Callable[[int], None] | None = None,
-    check: Callable[[TrainSettings, dict[str, Any]], None] | None = None,
+    check: Callable[[TrainSettings, EnvSettings], None] | None = None,
 ) -> Measurement:
     """Run the deterministic policy of the checkpoint at ``path`` (a checkpoint, pointer or run folder).
 
     The environment is the checkpoint's stage as evaluation sees it (neutral starts), changed by
-    ``overrides``; the episodes are the stage's test episodes unless ``seed`` asks for others (episode i
+    ``overrides`` (fields of ``EnvSettings``); the episodes are the stage's test episodes unless ``seed`` asks for others (episode i
     then uses ``seed + i``). ``check`` may refuse the resolved settings (raise) before anything runs.
     """
     directory = resolve_checkpoint(path)
     settings, policy = load_policy(directory, device)
-    env_settings = {**evaluation_settings(settings.env), **(overrides or {})}
+    env_settings = settings.env.for_evaluation().replace(**(overrides or {}))
     if check is not None:
         check(settings, env_settings)
     held_out = seed is None
     first = held_out_seed(settings.seed, settings.stage) if seed is None else seed
-    env = LanroEnv(
-        settings.task, object_slots=settings.slots, render_mode="rgb_array" if gif else None, **env_settings
-    )
+    env = LanroEnv(settings.task, env_settings, object_slots=settings.slots, render_mode="rgb_array" if gif else None)
     try:
         report = evaluate(env, policy, episodes, first, gif, progress, instruction)
     finally:
@@ -72,7 +72,7 @@ def measure(
     record = {
         "checkpoint": checkpoint_name(directory),
         "task": settings.task,
-        "env": env_settings,
+        "env": env_settings.to_dict(),
         "episodes_from": {"test_set": held_out, "first_seed": first},
         "instruction": instruction.value,
         **report.as_dict(),

@@ -20,19 +20,15 @@ import numpy as np
 import torch
 
 from lanrocli.agent import ObjectLayout, ReplayBuffer, SACAgent, SACSettings
-from lanrocli.envs import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
-from lanrocli.envs.evaluation import EvaluationReport, evaluate, evaluation_settings
+from lanrocli.choices import Task
+from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
+from lanrocli.envs.evaluation import EvaluationReport, evaluate
+from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.tasks import make_task
 from lanrocli.language import grammar_vocabulary
-from lanrocli.train.checkpoint import (
-    CheckpointError,
-    load_agent_state,
-    load_checkpoint,
-    load_state,
-    resolve_checkpoint,
-    save_checkpoint,
-)
-from lanrocli.train.collect import Collector, state_from_json, state_to_json
+from lanrocli.train.checkpoint import Checkpoint, load_checkpoint, resolve_checkpoint, save_checkpoint
+from lanrocli.train.collect import Collector
+from lanrocli.train.runfolder import CheckpointError
 
 SUCCESS_WINDOW = 100
 """Training episodes over which the reported training success is averaged."""
@@ -43,9 +39,8 @@ SUCCESS_WINDOW = 100
 class TrainSettings:
     """What training one stage needs besides the agent's own settings."""
 
-    task: str = "reach"
-    env: Mapping[str, Any] = field(default_factory=dict)
-    """Keyword arguments of ``LanroEnv`` besides the task (objects, mode, correction_rate, ...)."""
+    task: Task = Task.REACH
+    env: EnvSettings = field(default_factory=EnvSettings)
     seed: int = 0
     envs: int = 1
     eval_episodes: int = 20
@@ -64,12 +59,13 @@ class TrainSettings:
             raise ValueError("eval_episodes must be positive")
         if self.learning_starts < 0:
             raise ValueError(f"learning_starts must not be negative, got {self.learning_starts}")
-        if self.object_slots is not None and self.object_slots < int(self.env.get("objects", 2)):
+        object.__setattr__(self, "task", Task(self.task))
+        if self.object_slots is not None and self.object_slots < self.env.objects:
             raise ValueError(f"object_slots {self.object_slots} is fewer than the stage's objects")
 
     @property
     def slots(self) -> int:
-        return self.object_slots if self.object_slots is not None else int(self.env.get("objects", 2))
+        return self.object_slots if self.object_slots is not None else self.env.objects
 
     @property
     def env_seed(self) -> int:
@@ -78,8 +74,12 @@ class TrainSettings:
 
     def to_dict(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
-        data["env"] = dict(self.env)
+        data["env"] = self.env.to_dict()
         return data
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> TrainSettings:
+        return cls(**{**data, "env": EnvSettings(**data["env"])})
 
 
 def pick_device(requested: str | None) -> torch.device:
@@ -122,10 +122,9 @@ class AgentPolicy:
 def load_policy(path: Path, device: str | torch.device = "cpu") -> tuple[TrainSettings, AgentPolicy]:
     """The settings a checkpoint was trained with and its deterministic policy; ``path`` is a checkpoint,
     a pointer file or a run folder. Raises CheckpointError, ValueError or KeyError on a bad checkpoint."""
-    directory = resolve_checkpoint(path)
-    settings = TrainSettings(**load_state(directory)["train_settings"])
-    agent = SACAgent.from_state_dict(load_agent_state(directory, device), torch.device(device))
-    return settings, AgentPolicy(agent)
+    contents = load_checkpoint(resolve_checkpoint(path), device, resumable=False)
+    agent = SACAgent.from_state_dict(contents.agent, torch.device(device))
+    return TrainSettings.from_dict(contents.train_settings), AgentPolicy(agent)
 
 
 @dataclass
@@ -152,7 +151,7 @@ class Trainer:
         self.device = torch.device(device)
         self.vocabulary = grammar_vocabulary()
         obs_dim = observation_size(settings.slots)
-        action_dim = 4 if make_task(settings.task).gripper else 3
+        action_dim = make_task(settings.task).action_size
         layout = ObjectLayout(ARM_SIZE, OBJECT_SIZE, settings.slots)
         self.agent = SACAgent(
             obs_dim, action_dim, len(self.vocabulary), agent_settings, settings.seed, self.device, layout
@@ -163,7 +162,7 @@ class Trainer:
             action_dim,
             max_objects=settings.slots,
             vocabulary=self.vocabulary,
-            negations=bool(settings.env.get("negations", False)),
+            negations=settings.env.negations,
             seed=settings.seed,
         )
         self.rng = np.random.default_rng(np.random.SeedSequence(settings.seed).spawn(2)[1])
@@ -178,10 +177,9 @@ class Trainer:
         """Builds environments of the current stage, observed through the run's object slots. A plain
         partial, so that subprocesses receive the settings and not the trainer."""
         s = self.settings
-        env = evaluation_settings(s.env) if evaluation else s.env
-        return functools.partial(LanroEnv, s.task, object_slots=s.slots, **env)
+        return functools.partial(LanroEnv, s.task, s.env.for_evaluation() if evaluation else s.env, object_slots=s.slots)
 
-    def enter_stage(self, env: Mapping[str, Any], stage: int) -> None:
+    def enter_stage(self, env: EnvSettings, stage: int) -> None:
         """Collect and evaluate with new environment settings from now on.
 
         The old stage's unfinished episodes are dropped: they were collected under a goal distribution
@@ -189,8 +187,8 @@ class Trainer:
         """
         self.close()
         self._restore = None
-        self.settings = dataclasses.replace(self.settings, env=dict(env), stage=stage)
-        self.buffer.negations = bool(env.get("negations", False))
+        self.settings = dataclasses.replace(self.settings, env=env, stage=stage)
+        self.buffer.negations = env.negations
 
     # -- running -----------------------------------------------------------------------------------------
 
@@ -258,36 +256,36 @@ class Trainer:
         """Write a checkpoint at ``directory`` (which must not exist). ``extra``: plain data of the caller's
         (a curriculum's position) stored beside the trainer's. A checkpoint that is not ``resumable`` holds
         the agent and the settings only: enough to evaluate, a fraction of the size."""
-        state = {
-            "train_settings": self.settings.to_dict(),
-            "agent_settings": self.agent_settings.to_dict(),
-            "vocabulary": self.vocabulary.to_dict(),
-            "progress": dataclasses.asdict(self.progress),
-            "rng": state_to_json(self.rng.bit_generator.state),
-            "wall_time": self.wall_time(),
-            "extra": dict(extra or {}),
-        }
-        if not resumable:
-            return save_checkpoint(directory, self.agent.state_dict(), None, state, None)
-        collector = self._ensure_collector()
-        state["environments"] = collector.snapshots()
-        return save_checkpoint(directory, self.agent.state_dict(), self.buffer, state, collector.partials())
+        contents = Checkpoint(
+            agent=self.agent.state_dict(),
+            train_settings=self.settings.to_dict(),
+            vocabulary=self.vocabulary.to_dict(),
+            progress=dataclasses.asdict(self.progress),
+            rng=self.rng.bit_generator.state,
+            wall_time=self.wall_time(),
+            extra=dict(extra or {}),
+        )
+        if resumable:
+            collector = self._ensure_collector()
+            contents = dataclasses.replace(
+                contents, buffer=self.buffer, partials=collector.partials(), environments=collector.snapshots()
+            )
+        return save_checkpoint(directory, contents)
 
     @classmethod
     def load(cls, directory: Path, device: str | torch.device = "cpu") -> tuple[Trainer, dict[str, Any]]:
         """The trainer exactly as a resumable checkpoint left it, and the caller's ``extra`` data."""
-        agent_state, buffer, state, partials = load_checkpoint(directory, device)
-        settings = TrainSettings(**state["train_settings"])
-        trainer = cls(settings, SACSettings.from_dict(state["agent_settings"]), device)
-        if trainer.vocabulary.to_dict() != state["vocabulary"]:
+        contents = load_checkpoint(directory, device)
+        trainer = cls(TrainSettings.from_dict(contents.train_settings), contents.agent_settings, device)
+        if trainer.vocabulary.to_dict() != contents.vocabulary:
             raise CheckpointError(f"{directory} was written with another vocabulary than this version of lanro's")
-        trainer.agent.load_state_dict(agent_state)
-        trainer.buffer = buffer
-        trainer.progress = Progress(**state["progress"])
-        trainer.rng.bit_generator.state = state_from_json(state["rng"])
-        trainer._wall_before = float(state["wall_time"])
-        trainer._restore = (state["environments"], partials)
-        return trainer, state["extra"]
+        trainer.agent.load_state_dict(contents.agent)
+        trainer.buffer = contents.buffer
+        trainer.progress = Progress(**contents.progress)
+        trainer.rng.bit_generator.state = contents.rng
+        trainer._wall_before = contents.wall_time
+        trainer._restore = (contents.environments, contents.partials)
+        return trainer, contents.extra
 
     def close(self) -> None:
         if self._collector is not None:

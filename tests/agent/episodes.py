@@ -53,6 +53,6 @@ def random_episode(
         terminated=terminated,
         achieved=achieved,
         goal_index=goal,
-        objects=[(o.colour, o.shape) for o in objects],
+        objects=tuple(objects),
         task=task,
     )

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from lanrocli.envs import ENV_IDS, LanroEnv, observation_size
+from lanrocli.envs.env import LanroEnv, observation_size
+from lanrocli.registration import ENV_IDS
 from lanrocli.envs.policies import make_policy
 from lanrocli.language import RARE_COLOUR_WORDS, SHAPE_WORDS, all_corrections, all_instructions, grammar_vocabulary
 from lanrocli.sim import WORKSPACE
@@ -39,7 +40,7 @@ def rollout(env: LanroEnv, policy_name: str, seed: int) -> list[tuple]:
 
 @pytest.fixture(scope="module")
 def correcting_env():
-    env = LanroEnv("reach", objects=3, mode="color_shape", correction_rate=1.0, negations=True, rare_words=True)
+    env = LanroEnv("reach", objects=3, mode="colour_shape", correction_rate=1.0, negations=True, rare_words=True)
     yield env
     env.close()
 
@@ -64,7 +65,7 @@ def test_spaces_and_layout() -> None:
     np.testing.assert_allclose(o[7 + 31 : 10 + 31], info["object_positions"][1], atol=1e-6)
     np.testing.assert_allclose(o[10 + 31 : 13 + 31], info["object_positions"][1] - o[:3], atol=1e-6)
     np.testing.assert_allclose(o[13 + 31 : 16 + 31], 0.0, atol=1e-6)  # nothing has moved at reset
-    colour, shape = info["objects"][2]
+    colour, shape = info["objects"][2].colour, info["objects"][2].shape
     one_hot = o[7 + 62 + 19 : 7 + 93]
     assert one_hot.sum() == 2 and one_hot[["red", "green", "blue"].index(colour)] == 1
     assert one_hot[9 + ["cube", "cuboid", "cylinder"].index(shape)] == 1
@@ -130,7 +131,7 @@ def test_corrections_reach_the_observation_on_the_step_they_are_spoken(correctin
 @pytest.mark.parametrize("n_objects", [2, 3])
 def test_common_ground_episodes_need_their_rare_colour_word(n_objects: int) -> None:
     env = LanroEnv(
-        "reach", objects=n_objects, mode="color_shape", correction_rate=1.0, rare_words=True, kinds=["common_ground"]
+        "reach", objects=n_objects, mode="colour_shape", correction_rate=1.0, rare_words=True, kinds=["common_ground"]
     )
     shape_of = {word: shape for shape, words in SHAPE_WORDS.items() for word in words}
     for seed in range(100):
@@ -138,7 +139,7 @@ def test_common_ground_episodes_need_their_rare_colour_word(n_objects: int) -> N
         rare, noun = info["instruction_text"].split()[-2:]
         assert rare in RARE_COLOUR_WORDS.values()
         shape = shape_of.get(noun)  # None for "object"
-        without_colour = [k for k, (_, s) in enumerate(info["objects"]) if shape is None or s == shape]
+        without_colour = [k for k, o in enumerate(info["objects"]) if shape is None or o.shape == shape]
         assert info["goal_index"] in without_colour and len(without_colour) >= 2, info
     env.close()
 
@@ -195,7 +196,7 @@ def test_bad_settings_raise_clear_errors(kwargs: dict, setting: str) -> None:
 
 @pytest.mark.parametrize("task, threshold", [("reach", 0.95), ("push", 0.9), ("grasp", 0.85), ("lift", 0.8)])
 def test_oracle_solves_the_task(task: str, threshold: float) -> None:
-    env = LanroEnv(task, objects=2, mode="color_shape")
+    env = LanroEnv(task, objects=2, mode="colour_shape")
     successes = [rollout(env, "oracle", seed)[-1][-1]["is_success"] for seed in range(12)]
     assert np.mean(successes) >= threshold
     env.close()
@@ -232,7 +233,7 @@ def test_object_slots_pad_the_observation_with_zeros() -> None:
 
 
 def test_random_starts_put_the_hand_near_the_table_clear_of_the_objects() -> None:
-    env = LanroEnv("reach", objects=3, mode="color_shape", random_start=1.0)
+    env = LanroEnv("reach", objects=3, mode="colour_shape", random_start=1.0)
     starts = []
     for seed in range(40):
         obs, info = env.reset(seed=seed)
@@ -246,7 +247,7 @@ def test_random_starts_put_the_hand_near_the_table_clear_of_the_objects() -> Non
     assert np.all(starts >= np.array(WORKSPACE.low) - 1e-3) and np.all(starts[:, 2] <= 0.101)
     assert starts[:, 2].min() < 0.03  # some start low beside the objects, where corrections leave the hand
     assert np.std(starts[:, 0]) > 0.05 and np.std(starts[:, 1]) > 0.05
-    again = LanroEnv("reach", objects=3, mode="color_shape", random_start=1.0)
+    again = LanroEnv("reach", objects=3, mode="colour_shape", random_start=1.0)
     np.testing.assert_array_equal(again.reset(seed=7)[0]["observation"], env.reset(seed=7)[0]["observation"])
     env.close()
     again.close()

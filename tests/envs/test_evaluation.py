@@ -7,10 +7,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from lanrocli.envs import LanroEnv
-from lanrocli.envs.evaluation import METRIC_NAMES, EpisodeResult, EvaluationReport, Instruction, evaluate
+from lanrocli.envs.env import LanroEnv
+from lanrocli.choices import Instruction
+from lanrocli.envs.evaluation import METRIC_NAMES, EpisodeResult, EvaluationReport, evaluate
 from lanrocli.envs.policies import make_policy
-from lanrocli.language import TASK_VERBS, ObjectProps, identifying_phrases, instruction
+from lanrocli.language import TASK_VERBS, identifying_phrases, instruction
 
 
 def episode(success: bool, challenge: str | None = None, corrected: bool = False, negation: bool = False) -> EpisodeResult:
@@ -61,7 +62,7 @@ class Reader:
 
 @pytest.fixture(scope="module")
 def env():
-    env = LanroEnv("reach", objects=3, mode="color_shape")
+    env = LanroEnv("reach", objects=3, mode="colour_shape")
     yield env
     env.close()
 
@@ -85,7 +86,7 @@ def test_other_names_another_object_and_is_judged_on_it(env: LanroEnv) -> None:
     assert report.overall.successes == 0
     for i in range(5):
         _, info = env.reset(seed=3 + i)
-        objects = [ObjectProps(c, s) for c, s in info["objects"]]
+        objects = list(info["objects"])
         goal = info["goal_index"]
         text = env.vocabulary.decode(reader.shown[sum(r.length for r in report.results[:i])])
         named = {

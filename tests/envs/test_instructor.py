@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lanrocli.envs.instructor import Instructor, InstructorSettings, Kind
-from lanrocli.envs.scene import Mode, Scene, sample_objects
+from lanrocli.choices import Kind, Mode
+from lanrocli.envs.instructor import Instructor, InstructorSettings
+from lanrocli.envs.scene import Scene, sample_objects
 from lanrocli.language import (
     BEGINNING_WORDS,
     RARE_COLOUR_WORDS,
@@ -37,7 +38,7 @@ def fits(named: tuple[str | None, str | None], obj: ObjectProps) -> bool:
     return (named[0] is None or named[0] == obj.colour) and (named[1] is None or named[1] == obj.shape)
 
 
-def run_episode(seed: int, kind: Kind, negations: bool, delay: int, n_objects: int = 3, mode: Mode = Mode.COLOR_SHAPE):
+def run_episode(seed: int, kind: Kind, negations: bool, delay: int, n_objects: int = 3, mode: Mode = Mode.COLOUR_SHAPE):
     rng = np.random.default_rng(seed)
     settings = InstructorSettings(correction_rate=1.0, negations=negations, max_delay=delay, rare_words=True, kinds=(kind,))
     instructor = Instructor("push", settings)
@@ -164,7 +165,7 @@ def test_delayed_corrections_arrive_within_max_delay(delay: int) -> None:
 def test_plain_episodes_never_correct() -> None:
     rng = np.random.default_rng(0)
     instructor = Instructor("reach", InstructorSettings())
-    objects, goal = sample_objects(rng, Mode.COLOR, 3)
+    objects, goal = sample_objects(rng, Mode.COLOUR, 3)
     instructor.start(rng, Scene(objects, goal, np.zeros((3, 2))), instructor.draw_challenge(rng))
     assert instructor.challenge is None
     assert not instructor.observe(rng, 1, np.ones(3, dtype=bool))

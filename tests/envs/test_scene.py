@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lanrocli.envs.scene import Mode, mode_catalogue, sample_objects, sample_positions
+from lanrocli.choices import Mode
+from lanrocli.envs.scene import mode_catalogue, sample_objects, sample_positions
 
 
 @pytest.mark.parametrize("mode", list(Mode))
@@ -26,9 +27,9 @@ def test_overlap_rule_holds_on_thousands_of_scenes(mode: Mode, n_objects: int) -
 
 
 def test_mode_catalogues() -> None:
-    assert len(mode_catalogue(Mode.COLOR)) == 9 and {o.shape for o in mode_catalogue(Mode.COLOR)} == {"cube"}
+    assert len(mode_catalogue(Mode.COLOUR)) == 9 and {o.shape for o in mode_catalogue(Mode.COLOUR)} == {"cube"}
     assert len(mode_catalogue(Mode.SHAPE)) == 9 and len({o.colour for o in mode_catalogue(Mode.SHAPE)}) == 3
-    assert len(mode_catalogue(Mode.COLOR_SHAPE)) == 27
+    assert len(mode_catalogue(Mode.COLOUR_SHAPE)) == 27
 
 
 def test_positions_keep_their_distance_and_area() -> None:
@@ -60,6 +61,6 @@ def test_same_shape_request_puts_another_object_of_the_goals_shape_on_the_table(
 
 def test_scene_requests_keep_scenes_a_function_of_the_seed() -> None:
     for need in ({"need_shared": True}, {"need_same_shape": True}, {}):
-        first = [sample_objects(np.random.default_rng(s), Mode.COLOR_SHAPE, 3, **need) for s in range(200)]
-        again = [sample_objects(np.random.default_rng(s), Mode.COLOR_SHAPE, 3, **need) for s in range(200)]
+        first = [sample_objects(np.random.default_rng(s), Mode.COLOUR_SHAPE, 3, **need) for s in range(200)]
+        again = [sample_objects(np.random.default_rng(s), Mode.COLOUR_SHAPE, 3, **need) for s in range(200)]
         assert first == again

@@ -2,22 +2,21 @@
 
 from __future__ import annotations
 
-import typing
+import dataclasses
 from pathlib import Path
 
 import pytest
 
 from lanrocli.agent import SACSettings
-from lanrocli.envs import Kind, Mode
+from lanrocli.choices import Kind, Mode, Task
+from lanrocli.envs.settings import EnvSettings
 from lanrocli.language import TASKS
 from lanrocli.train.curriculum import (
     QUICK_TEST_EPISODES,
     Curriculum,
     CurriculumError,
     EnvConfig,
-    KindName,
     Problem,
-    TaskName,
     builtin_curriculum,
     diff_curricula,
     load_curriculum,
@@ -59,29 +58,38 @@ def test_valid_file_loads_with_defaults(tmp_path: Path) -> None:
     assert curriculum.agent.settings() == SACSettings()
     stage = curriculum.stages[0]
     assert stage.env == EnvConfig()
-    assert (stage.env.objects, stage.env.mode, stage.env.correction_rate, stage.env.kinds) == (2, "color", 0.0, None)
+    assert (stage.env.objects, stage.env.mode, stage.env.correction_rate, stage.env.kinds) == (2, "colour", 0.0, None)
     assert (stage.budget.steps, stage.promote, stage.on_budget) == (1000, None, "advance")
     assert (curriculum.max_objects, curriculum.total_steps) == (2, 1000)
 
 
-def test_env_kwargs_leave_environment_defaults_to_the_environment() -> None:
-    kwargs = EnvConfig(objects=3, correction_rate=0.5, kinds=["ambiguity"]).env_kwargs()
-    assert kwargs == {
+def test_env_section_is_the_environments_settings() -> None:
+    settings = EnvConfig(objects=3, correction_rate=0.5, kinds=["ambiguity"]).settings()
+    assert settings == EnvSettings(objects=3, correction_rate=0.5, kinds=(Kind.AMBIGUITY,))
+    assert settings.to_dict() == {
         "objects": 3,
-        "mode": "color",
+        "mode": "colour",
         "correction_rate": 0.5,
         "negations": False,
         "max_delay": 0,
         "rare_words": False,
         "kinds": ["ambiguity"],
+        "max_episode_steps": None,
         "random_start": 0.0,
     }
+    assert list(EnvConfig.model_fields) == [f.name for f in dataclasses.fields(EnvSettings)]
 
 
-def test_literals_match_the_environment_and_language() -> None:
-    assert set(typing.get_args(KindName)) == {kind.value for kind in Kind}
-    assert set(typing.get_args(TaskName)) == set(TASKS)
-    assert set(typing.get_args(EnvConfig.model_fields["mode"].annotation)) == {mode.value for mode in Mode}
+def test_choices_are_the_shared_enums() -> None:
+    assert Curriculum.model_fields["task"].annotation is Task
+    assert EnvConfig.model_fields["mode"].annotation is Mode
+    assert set(TASKS) == {task.value for task in Task}
+
+
+def test_old_mode_spelling_is_read_with_a_warning(tmp_path: Path) -> None:
+    with pytest.warns(FutureWarning, match="'color_shape' is read as 'colour_shape'"):
+        curriculum = load_curriculum(write(tmp_path, "c.yaml", MINIMAL + "    env: {objects: 3, mode: color_shape}\n"))
+    assert curriculum.stages[0].env.mode is Mode.COLOUR_SHAPE
 
 
 def test_unknown_key_suggests_the_closest_field(tmp_path: Path) -> None:
@@ -107,16 +115,16 @@ def test_out_of_range_value_in_second_stage(tmp_path: Path) -> None:
     path = write(tmp_path, "c.yaml", text)
     problem = only_problem(path)
     assert (problem.file, problem.line, problem.path) == (path, 8, "stages[1].env.correction_rate")
-    assert "less than or equal to 1" in problem.message
+    assert "within [0, 1], got 1.5" in problem.message
     assert str(problem) == f"{path}:8: stages[1].env.correction_rate: {problem.message}"
 
 
 def test_random_start_is_a_share_of_episodes(tmp_path: Path) -> None:
     problem = only_problem(write(tmp_path, "c.yaml", MINIMAL + "    env: {random_start: 2}\n"))
     assert (problem.line, problem.path) == (6, "stages[0].env.random_start")
-    assert "less than or equal to 1" in problem.message
+    assert "within [0, 1], got 2" in problem.message
     stage = load_curriculum(write(tmp_path, "ok.yaml", MINIMAL + "    env: {random_start: 0.5}\n")).stages[0]
-    assert stage.env.env_kwargs()["random_start"] == 0.5
+    assert stage.env.settings().random_start == 0.5
 
 
 def test_empty_stage_list(tmp_path: Path) -> None:
@@ -214,7 +222,7 @@ seed: -1
 agent: {actor_lr: fast}
 stages:
   - name: first
-    env: {objects: 4, mode: colour}
+    env: {objects: 4, mode: colours}
     budget: {steps: 0}
     on_budget: pause
 """
@@ -348,7 +356,7 @@ agent: {actor_lr: 3e-4, max_grad_norm: 1.0}
     curriculum = load_curriculum(write(tmp_path, "c.yaml", text))
     again = load_curriculum(write(tmp_path, "plan.yaml", curriculum.to_yaml()))
     assert again == curriculum
-    assert again.stages[0].env.kinds == ["wrong_object", "ambiguity"]
+    assert again.stages[0].env.kinds == ("wrong_object", "ambiguity")
 
 
 def test_quick_caps_budgets_and_evaluation(tmp_path: Path) -> None:
@@ -386,7 +394,7 @@ def test_builtin_curriculum() -> None:
     assert (corrections.env.correction_rate, corrections.env.max_delay) == (0.5, 5)
     assert (negations.env.objects, negations.env.mode, negations.env.negations, negations.promote) == (
         3,
-        "color_shape",
+        "colour_shape",
         True,
         None,
     )

@@ -11,13 +11,15 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import NamedTuple
 
 import pytest
 
 from lanrocli.envs.evaluation import EpisodeResult, EvaluationReport, wilson_interval
-from lanrocli.train.checkpoint import LATEST, read_pointer, resolve_checkpoint
+from lanrocli.train.checkpoint import resolve_checkpoint
 from lanrocli.train.curriculum import Curriculum, load_curriculum
-from lanrocli.train.pipeline import CONFIG, METRICS, REPORT, CurriculumRun, RunError, RunState
+from lanrocli.train.pipeline import CurriculumRun, RunError, RunState
+from lanrocli.train.runfolder import CONFIG, LATEST, METRICS, REPORT, read_pointer
 from lanrocli.train.seeds import evaluation_seed, held_out_seed
 
 TINY = """\
@@ -38,7 +40,7 @@ stages:
     env: {{objects: 2, correction_rate: 0.5, max_episode_steps: 20}}
     budget: {{steps: 80}}
   - name: third
-    env: {{objects: 3, mode: color_shape, correction_rate: 0.5, negations: true, max_episode_steps: 20}}
+    env: {{objects: 3, mode: colour_shape, correction_rate: 0.5, negations: true, max_episode_steps: 20}}
     budget: {{steps: 80}}
 """
 
@@ -77,6 +79,7 @@ def rows(out: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow
 def test_promotion_happens_exactly_when_the_pooled_rule_holds(tmp_path: Path) -> None:
     plan = load_curriculum(tiny(tmp_path))
     data = plan.model_dump()
@@ -116,6 +119,7 @@ def test_a_lower_bound_rule_needs_enough_episodes(tmp_path: Path) -> None:
     assert run.state.results[0].rule_value == pytest.approx(wilson_interval(4, 4)[0])
 
 
+@pytest.mark.slow
 def test_consecutive_evaluations_meet_fresh_episodes(tmp_path: Path) -> None:
     plan = load_curriculum(tiny(tmp_path))
     run = CurriculumRun.start(plan, tmp_path / "run")
@@ -153,12 +157,10 @@ def test_on_budget_stop_ends_the_run_and_the_report_says_so(tmp_path: Path) -> N
     assert "on_budget: stop" in (tmp_path / "run" / REPORT).read_text()
 
 
-def test_the_run_folder_has_every_file(tmp_path: Path) -> None:
-    out = tmp_path / "run"
-    run = CurriculumRun.start(load_curriculum(tiny(tmp_path)), out)
-    assert run.run()
-    run.close()
-    assert load_curriculum(out / CONFIG) == load_curriculum(tiny(tmp_path))
+@pytest.mark.slow
+def test_the_run_folder_has_every_file(straight: Baseline) -> None:
+    out = straight.out
+    assert load_curriculum(out / CONFIG) == load_curriculum(straight.curriculum)
     assert [r["stage_name"] for r in rows(out)] == ["first"] * 2 + ["second"] * 2 + ["third"] * 2
     for index, name in enumerate(["first", "second", "third"], start=1):
         folder = out / f"stage-{index}-{name}"
@@ -206,6 +208,23 @@ def train(args: list[str], cwd: Path) -> subprocess.Popen[str]:
     )
 
 
+class Baseline(NamedTuple):
+    curriculum: Path
+    out: Path
+
+
+@pytest.fixture(scope="module")
+def straight(tmp_path_factory: pytest.TempPathFactory) -> Baseline:
+    """The tiny curriculum on two environments, trained by ``lanro train`` without interruption: what every
+    interrupted run must end up equal to, and the run folder whose files are checked. Trained once for all
+    of them, as it is the slowest thing here; the tests only read it."""
+    folder = tmp_path_factory.mktemp("straight")
+    path = tiny(folder, envs=2)
+    process = train([str(path), "--out", "straight"], folder)
+    assert process.wait(timeout=300) == 0, process.stdout.read() if process.stdout else ""
+    return Baseline(path, folder / "straight")
+
+
 def wait_for_rows(out: Path, n: int, process: subprocess.Popen[str]) -> None:
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and process.poll() is None:
@@ -225,12 +244,10 @@ def outcome(out: Path) -> tuple[list[dict[str, str]], list[tuple[str, int, int, 
     return metrics, stages, tests
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", [signal.SIGINT, signal.SIGKILL])
-def test_interrupted_runs_resume_to_the_same_result(tmp_path: Path, how: signal.Signals) -> None:
-    path = tiny(tmp_path, envs=2)
-    straight = train([str(path), "--out", "straight"], tmp_path)
-    assert straight.wait(timeout=300) == 0, straight.stdout.read() if straight.stdout else ""
-
+def test_interrupted_runs_resume_to_the_same_result(tmp_path: Path, how: signal.Signals, straight: Baseline) -> None:
+    path = straight.curriculum
     process = train([str(path), "--out", "cut"], tmp_path)
     wait_for_rows(tmp_path / "cut", 3, process)  # inside the second stage
     os.killpg(process.pid, how)
@@ -243,5 +260,5 @@ def test_interrupted_runs_resume_to_the_same_result(tmp_path: Path, how: signal.
     resumed = train([str(path), "--out", "cut", "--resume"], tmp_path)
     assert resumed.wait(timeout=300) == 0, resumed.stdout.read() if resumed.stdout else ""
 
-    assert outcome(tmp_path / "cut") == outcome(tmp_path / "straight")
+    assert outcome(tmp_path / "cut") == outcome(straight.out)
     assert [s[0] for s in outcome(tmp_path / "cut")[1]] == ["first", "second", "third"]

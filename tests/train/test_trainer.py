@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import pickle
 import signal
 import subprocess
 import sys
@@ -16,12 +15,14 @@ import pytest
 import torch
 
 from lanrocli.agent import SACSettings
-from lanrocli.train import CheckpointError, Trainer, TrainSettings
-from lanrocli.train.checkpoint import AGENT_FILE, LATEST, load_agent_state, read_pointer
+from lanrocli.envs.settings import EnvSettings
+from lanrocli.train.checkpoint import AGENT_FILE, load_agent_state
+from lanrocli.train.runfolder import LATEST, CheckpointError, read_pointer
+from lanrocli.train.trainer import Trainer, TrainSettings, pick_device
 
 SETTINGS = TrainSettings(
     task="push",
-    env={"objects": 2, "correction_rate": 0.5},
+    env=EnvSettings(objects=2, correction_rate=0.5),
     seed=3,
     envs=1,
     eval_episodes=2,
@@ -35,6 +36,7 @@ def parameters(trainer: Trainer) -> list[torch.Tensor]:
     return [p.detach().clone() for net in (agent.actor, agent.critic, agent.target_critic) for p in net.parameters()]
 
 
+@pytest.mark.slow
 def test_tiny_training_run_end_to_end() -> None:
     trainer = Trainer(SETTINGS, AGENT)
     before = parameters(trainer)
@@ -52,7 +54,7 @@ def test_tiny_training_run_end_to_end() -> None:
 
 
 def test_random_starts_are_for_training_only() -> None:
-    trainer = Trainer(dataclasses.replace(SETTINGS, env={**SETTINGS.env, "random_start": 1.0}), AGENT)
+    trainer = Trainer(dataclasses.replace(SETTINGS, env=SETTINGS.env.replace(random_start=1.0)), AGENT)
     training, evaluation = trainer.env_factory()(), trainer.env_factory(evaluation=True)()
     hands = [env.reset(seed=seed)[0]["observation"][:3] for seed in range(3) for env in (training, evaluation)]
     assert all(not np.allclose(hand, (0.0, 0.0, 0.10), atol=2e-3) for hand in hands[0::2])
@@ -61,6 +63,7 @@ def test_random_starts_are_for_training_only() -> None:
     evaluation.close()
 
 
+@pytest.mark.slow
 def test_resume_continues_exactly(tmp_path: Path) -> None:
     straight = Trainer(SETTINGS, AGENT)
     straight.run(300)
@@ -90,11 +93,11 @@ def test_stop_request_ends_the_run_before_the_next_step() -> None:
 
 
 def test_entering_a_stage_changes_the_environments_and_keeps_the_learning() -> None:
-    settings = TrainSettings(task="reach", env={"objects": 2}, envs=1, learning_starts=32, object_slots=3)
+    settings = TrainSettings(task="reach", env=EnvSettings(objects=2), envs=1, learning_starts=32, object_slots=3)
     trainer = Trainer(settings, AGENT)
     trainer.run(60)
     updates, stored = trainer.progress.updates, trainer.buffer.size
-    trainer.enter_stage({"objects": 3, "correction_rate": 0.5, "negations": True}, stage=1)
+    trainer.enter_stage(EnvSettings(objects=3, correction_rate=0.5, negations=True), stage=1)
     trainer.run(200)
     trainer.close()
     assert trainer.progress.updates > updates and trainer.buffer.size > stored and trainer.buffer.negations
@@ -108,10 +111,11 @@ WRITER = """
 import sys
 from pathlib import Path
 from lanrocli.agent import SACSettings
-from lanrocli.train import Trainer, TrainSettings
-from lanrocli.train.checkpoint import LATEST, prune, write_pointer
+from lanrocli.envs.settings import EnvSettings
+from lanrocli.train.runfolder import LATEST, prune, write_pointer
+from lanrocli.train.trainer import Trainer, TrainSettings
 out = Path(sys.argv[1])
-trainer = Trainer(TrainSettings(task="reach", env={"objects": 2}, learning_starts=10_000), SACSettings(buffer_size=2000))
+trainer = Trainer(TrainSettings(task="reach", env=EnvSettings(objects=2), learning_starts=10_000), SACSettings(buffer_size=2000))
 while True:
     trainer.run(trainer.progress.env_steps + 1)
     directory = trainer.save(out / f"step-{trainer.progress.env_steps:06d}")
@@ -122,6 +126,7 @@ while True:
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("delay", [0.05, 0.23, 0.41])
 def test_sigkill_during_checkpoint_writes_leaves_a_loadable_checkpoint(tmp_path: Path, delay: float) -> None:
     process = subprocess.Popen([sys.executable, "-c", WRITER, str(tmp_path)], stdout=subprocess.PIPE, text=True)
@@ -162,8 +167,6 @@ def test_missing_or_evaluation_only_checkpoints_are_clear_errors(tmp_path: Path)
 
 
 def test_cuda_request_without_cuda_is_a_clear_error() -> None:
-    from lanrocli.train import pick_device
-
     assert pick_device("cpu").type == "cpu"
     assert pick_device(None).type == ("cuda" if torch.cuda.is_available() else "cpu")
     if not torch.cuda.is_available():
@@ -173,15 +176,11 @@ def test_cuda_request_without_cuda_is_a_clear_error() -> None:
 
 @pytest.mark.parametrize("name", ["tpu", "meta", "", "CUDA", "cuda:-1"])
 def test_device_names_lanro_does_not_run_on_are_a_clear_error(name: str) -> None:
-    from lanrocli.train import pick_device
-
     with pytest.raises(ValueError, match="not a device lanro runs on"):
         pick_device(name)
 
 
 def test_a_cuda_index_beyond_the_machines_devices_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
-    from lanrocli.train import pick_device
-
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
     monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
     assert pick_device("cuda:1") == torch.device("cuda", 1) and pick_device("cuda").type == "cuda"
@@ -190,7 +189,7 @@ def test_a_cuda_index_beyond_the_machines_devices_is_a_clear_error(monkeypatch: 
 
 
 def test_two_environments_in_subprocesses_collect_whole_episodes(tmp_path: Path) -> None:
-    settings = TrainSettings(task="reach", env={"objects": 2}, seed=1, envs=2, learning_starts=10**6)
+    settings = TrainSettings(task="reach", env=EnvSettings(objects=2), seed=1, envs=2, learning_starts=10**6)
     trainer = Trainer(settings, AGENT)
     trainer.run(240)
     trainer.close()

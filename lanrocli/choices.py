@@ -1,0 +1,67 @@
+"""The named choices every layer shares: tasks, scene modes, kinds of correction, the sentence shown.
+
+One enum each, read alike by the environment, the curriculum schema (pydantic), the command line (typer)
+and the reports, so a new value is added here once. Each is a ``StrEnum``: its members are their values as
+strings (equal, hashed, printed and written to JSON as them), which is what files and the command line carry.
+"""
+
+from __future__ import annotations
+
+import warnings
+from enum import StrEnum
+
+
+class Task(StrEnum):
+    """What the arm must do to the goal object."""
+
+    REACH = "reach"
+    PUSH = "push"
+    GRASP = "grasp"
+    LIFT = "lift"
+
+
+class Mode(StrEnum):
+    """Which properties vary between the objects of a scene."""
+
+    COLOUR = "colour"
+    """Cubes in the nine colours."""
+    SHAPE = "shape"
+    """The three shapes in three colours."""
+    COLOUR_SHAPE = "colour_shape"
+    """The three shapes in the nine colours."""
+
+    @classmethod
+    def _missing_(cls, value: object) -> Mode | None:
+        # Curricula, checkpoints and commands written before the spelling was made one still load.
+        if isinstance(value, str) and value.replace("color", "colour") in cls._value2member_map_:
+            new = cls(value.replace("color", "colour"))
+            warnings.warn(
+                f"mode {value!r} is read as {new.value!r}, its spelling now; write {new.value!r}",
+                FutureWarning,
+                stacklevel=2,
+            )
+            return new
+        return None
+
+
+class Kind(StrEnum):
+    """The misunderstanding a correction episode is built around."""
+
+    AMBIGUITY = "ambiguity"
+    COMMON_GROUND = "common_ground"
+    INSTRUCTION_CORRECTION = "instruction_correction"
+    WRONG_OBJECT = "wrong_object"
+
+
+class Instruction(StrEnum):
+    """Which sentence the agent reads during an episode: the check that it follows language at all.
+
+    ``true`` is the instructor's sentence; ``blank`` is all padding, so an agent that reads language falls to
+    about chance among the objects; ``other`` names another object on the table, and the episode is won
+    when the task holds for that object, so an agent that reads language does about as well as with
+    ``true``. A policy that scores high on ``blank`` or low on ``other`` ignores its instruction.
+    """
+
+    TRUE = "true"
+    BLANK = "blank"
+    OTHER = "other"

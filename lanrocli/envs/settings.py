@@ -1,0 +1,100 @@
+"""``EnvSettings``: every setting of a ``LanroEnv`` besides its task, in the one place that checks them.
+
+The curriculum's ``env:`` schema and the options of ``lanro eval`` are generated from these fields (their
+types, defaults and ``help``), so a new environment setting is one new field here. A field's ``help``
+metadata is what the command line shows; its check is :meth:`EnvSettings.__post_init__` with every other
+setting left at its default, which is how the curriculum places a problem at the key that has it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from lanrocli.choices import Kind, Mode
+from lanrocli.envs.instructor import InstructorSettings
+
+PLAIN_LIMIT = 50
+"""Steps of an episode without corrections."""
+CORRECTION_LIMIT = 100
+"""Steps of an episode when corrections may be spoken: the arm needs time to recover from its mistake."""
+
+
+def _help(text: str) -> dict[str, str]:
+    return {"help": text}
+
+
+@dataclass(frozen=True)
+class EnvSettings:
+    """How a stage's episodes are drawn: objects, mode, the instructor's corrections, episode length, starts."""
+
+    objects: int = field(default=2, metadata=_help("Objects on the table (2 or 3)."))
+    mode: Mode = field(default=Mode.COLOUR, metadata=_help("Which properties vary between objects."))
+    correction_rate: float = field(
+        default=0.0, metadata=_help("Share of correction episodes, within [0, 1] (0: plain instructions).")
+    )
+    negations: bool = field(default=False, metadata=_help("Allow negating corrections ('not the red cube')."))
+    max_delay: int = field(default=0, metadata=_help("Corrections arrive 0..MAX_DELAY steps after the mistake."))
+    rare_words: bool = field(default=False, metadata=_help("Allow rare colour words (the common-ground case)."))
+    kinds: tuple[Kind, ...] | None = field(
+        default=None,
+        metadata=_help(f"Kinds of correction, comma-separated from {','.join(Kind)} (default: all)."),
+    )
+    max_episode_steps: int | None = field(
+        default=None,
+        metadata=_help(f"Steps per episode (default: {PLAIN_LIMIT}, or {CORRECTION_LIMIT} with corrections)."),
+    )
+    random_start: float = field(
+        default=0.0,
+        metadata=_help(
+            "Share of episodes that start with the hand at a random point near the table, clear of the "
+            "objects, instead of the neutral pose (for training; evaluation starts from the neutral pose)."
+        ),
+    )
+
+    def __post_init__(self) -> None:
+        if isinstance(self.objects, bool) or self.objects not in (2, 3):
+            raise ValueError(f"objects must be 2 or 3, got {self.objects!r}")
+        try:
+            object.__setattr__(self, "mode", Mode(self.mode))
+        except ValueError:
+            raise ValueError(f"mode must be one of {', '.join(Mode)}, got {self.mode!r}") from None
+        if self.max_episode_steps is not None and self.max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps must be positive, got {self.max_episode_steps}")
+        if not 0.0 <= self.random_start <= 1.0:
+            raise ValueError(f"random_start must be a probability within [0, 1], got {self.random_start}")
+        object.__setattr__(self, "kinds", None if self.kinds is None else self.instructor.kinds)
+        self.instructor  # the instructor checks its own settings, across fields too
+
+    @property
+    def instructor(self) -> InstructorSettings:
+        return InstructorSettings(
+            correction_rate=self.correction_rate,
+            negations=self.negations,
+            max_delay=self.max_delay,
+            rare_words=self.rare_words,
+            kinds=tuple(Kind) if self.kinds is None else tuple(self.kinds),
+        )
+
+    @property
+    def episode_limit(self) -> int:
+        """Steps after which an episode is truncated."""
+        if self.max_episode_steps is not None:
+            return self.max_episode_steps
+        return CORRECTION_LIMIT if self.correction_rate > 0 else PLAIN_LIMIT
+
+    def for_evaluation(self) -> EnvSettings:
+        """These settings as evaluation uses them: every episode starts from the neutral pose (random starts
+        are for training), so success is comparable across runs and curricula."""
+        return dataclasses.replace(self, random_start=0.0)
+
+    def replace(self, **changes: Any) -> EnvSettings:
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data for JSON and YAML: enums as their values, ``kinds`` as a list."""
+        data = dataclasses.asdict(self)
+        data["mode"] = self.mode.value
+        data["kinds"] = None if self.kinds is None else [kind.value for kind in self.kinds]
+        return data

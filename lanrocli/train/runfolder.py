@@ -1,0 +1,324 @@
+"""The run folder: the names of everything in it, how each file is written, and ``report.md``.
+
+The run folder holds everything a researcher looks at or resumes from::
+
+    config.yaml                  the resolved curriculum; --resume refuses a curriculum that differs
+    metrics.csv                  one row per evaluation
+    report.md                    the per-stage table, rewritten whenever a stage ends
+    latest                       pointer to the newest checkpoint
+    stage-K-NAME/step-N/         the stage's newest resumable checkpoint (agent, buffer, environments)
+    stage-K-NAME/best-N/         the agent of the stage's best evaluation (agent and state only)
+    stage-K-NAME/last, best      pointers to those two
+    events.*                     TensorBoard scalars, when the tensorboard package is installed
+
+    stage-K-NAME/test.json       the stage's last and best agents on its held-out test episodes
+
+Whatever may be read while a run is killed is replaced whole: it is written under a temporary name
+(``TMP_PREFIX``), then renamed into place. A pointer changes only after the checkpoint it names is complete
+on disk, so a kill at any moment leaves the previous checkpoint and the pointer to it whole.
+
+This module loads neither torch nor pybullet (TensorBoard's writer aside, imported when a run opens it),
+so plotting and reading a run folder stay quick.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import shutil
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from lanrocli.choices import Kind
+from lanrocli.envs.evaluation import METRIC_NAMES
+
+if TYPE_CHECKING:
+    from lanrocli.train.curriculum import Curriculum, Stage
+    from lanrocli.train.pipeline import RunState
+
+CONFIG = "config.yaml"
+METRICS = "metrics.csv"
+REPORT = "report.md"
+TEST = "test.json"
+BEST = "best"
+LAST = "last"
+LATEST = "latest"
+LANGUAGE = "language"
+"""Key of ``test.json`` under which the last stage's final agent is measured with each ``Instruction``."""
+TMP_PREFIX = ".tmp-"
+
+AGENT_METRICS = (
+    "critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy"
+)
+METRIC_COLUMNS = (
+    "stage", "stage_name", "env_steps", "stage_steps", "wall_time", *METRIC_NAMES, "mean_return", "mean_length",
+    "train_success", "rule_value", "rule_holds", *AGENT_METRICS,
+)
+
+
+class CheckpointError(RuntimeError):
+    """A checkpoint is missing, incomplete, or not plain data."""
+
+
+# -- names -------------------------------------------------------------------------------------------------
+
+
+def stage_folder(index: int, stage: Stage) -> str:
+    return f"stage-{index + 1}-{stage.name}"
+
+
+def step_checkpoint(env_steps: int) -> str:
+    """Zero-padded, so that the checkpoints of a stage sort by their steps."""
+    return f"step-{env_steps:010d}"
+
+
+def best_checkpoint(env_steps: int) -> str:
+    return f"best-{env_steps:010d}"
+
+
+# -- writing whole or not at all ---------------------------------------------------------------------------
+
+
+def fsync_file(path: Path) -> None:
+    with open(path, "rb") as f:
+        os.fsync(f.fileno())
+
+
+def fsync_dir(path: Path) -> None:
+    """Make a rename inside ``path`` durable: without it a crash may undo the rename after it returned."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def temporary(path: Path) -> Path:
+    """Where ``path`` is written before it is renamed into place."""
+    return path.with_name(f"{TMP_PREFIX}{path.name}")
+
+
+def write_pointer(pointer: Path, target: str) -> None:
+    """Point ``pointer`` (a small text file) at ``target`` atomically."""
+    tmp = temporary(pointer)
+    tmp.write_text(target + "\n")
+    fsync_file(tmp)
+    os.replace(tmp, pointer)
+    fsync_dir(pointer.parent)
+
+
+def read_pointer(pointer: Path) -> Path:
+    if not pointer.is_file():
+        raise CheckpointError(f"no checkpoint pointer at {pointer}")
+    return pointer.parent / pointer.read_text().strip()
+
+
+def write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write ``path`` whole or not at all: a kill mid-write leaves the old file or none."""
+    tmp = temporary(path)
+    tmp.write_text(json.dumps(data, indent=1))
+    os.replace(tmp, path)
+
+
+def prune(directory: Path, keep: set[Path]) -> None:
+    """Remove checkpoint directories under ``directory`` except ``keep``, and stale temporary ones."""
+    kept = {k.resolve() for k in keep}
+    for child in directory.iterdir():
+        if child.is_dir() and child.resolve() not in kept:
+            shutil.rmtree(child, ignore_errors=True)
+
+
+def publish(out: Path, last: Path, best: Path | None) -> None:
+    """Point the stage folder's ``last`` (and ``best``, when given) and the run's ``latest`` at checkpoints
+    just written, then remove the stage's checkpoints that no pointer names. Pointers change only once their
+    checkpoints are whole and pruning comes after them, so a kill at any moment leaves one to resume from."""
+    folder = last.parent
+    if best is not None:
+        write_pointer(folder / BEST, best.name)
+    write_pointer(folder / LAST, last.name)
+    write_pointer(out / LATEST, f"{folder.name}/{last.name}")
+    prune(folder, {read_pointer(folder / name) for name in (LAST, BEST) if (folder / name).is_file()})
+
+
+# -- metrics.csv -------------------------------------------------------------------------------------------
+
+
+def append_metrics(path: Path, row: dict[str, Any]) -> None:
+    new = not path.exists()
+    with open(path, "a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=METRIC_COLUMNS)
+        if new:
+            writer.writeheader()
+        writer.writerow(row)
+
+
+def truncate_metrics(path: Path, env_steps: int) -> None:
+    """Drop rows written after the checkpoint a run resumes from: the resumed run writes them again."""
+    if not path.is_file():
+        return
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    kept = [r for r in rows if int(r["env_steps"]) <= env_steps]
+    if len(kept) == len(rows):
+        return
+    tmp = temporary(path)
+    with open(tmp, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=METRIC_COLUMNS)
+        writer.writeheader()
+        writer.writerows(kept)
+    tmp.replace(path)
+
+
+class TensorBoard:
+    """Evaluation scalars as TensorBoard events when the optional ``tensorboard`` package is installed."""
+
+    def __init__(self, writer: Any) -> None:
+        self._writer = writer
+
+    @classmethod
+    def open(cls, out: Path, purge_step: int) -> TensorBoard:
+        try:
+            # Here and not at the top: the writer comes with torch, which readers of a run folder do not need.
+            from torch.utils.tensorboard import SummaryWriter
+        except ImportError:
+            return cls(None)
+        # purge_step drops events a killed run wrote after the checkpoint it resumes from.
+        return cls(SummaryWriter(str(out), purge_step=purge_step or None))
+
+    def write(self, row: dict[str, Any]) -> None:
+        if self._writer is None:
+            return
+        for name, value in row.items():
+            if isinstance(value, (int, float)) and name != "env_steps":
+                self._writer.add_scalar(f"eval/{name}", value, row["env_steps"])
+        self._writer.flush()
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+
+
+# -- report.md ---------------------------------------------------------------------------------------------
+
+
+def write_report(out: Path, curriculum: Curriculum, state: RunState) -> None:
+    (out / REPORT).write_text(render_report(curriculum, state, out))
+
+
+def render_report(curriculum: Curriculum, state: RunState, out: Path) -> str:
+    """``report.md``: how each stage went, and its agents on held-out test episodes, in Markdown."""
+    lines = [
+        f"# {curriculum.name}: {curriculum.task}",
+        "",
+        f"Seed {curriculum.seed}, {curriculum.envs} environments; evaluation on {curriculum.eval.episodes} fresh "
+        f"episodes every {curriculum.eval.every:,} steps; each stage's agents tested on "
+        f"{curriculum.test.episodes} held-out episodes.",
+        "",
+        *_stage_lines(curriculum, state),
+    ]
+    tests = {}
+    for result in state.results:
+        path = out / stage_folder(result.index, curriculum.stages[result.index]) / TEST
+        if path.is_file():
+            tests[result.index] = (result.name, json.loads(path.read_text()))
+    if tests:
+        lines += _test_lines(tests)
+    return "\n".join(lines) + "\n"
+
+
+def _stage_lines(curriculum: Curriculum, state: RunState) -> list[str]:
+    lines = [
+        "## Stages",
+        "",
+        "| stage | rule | steps | ended | evaluations | rule's value at the end | wall time |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for result in state.results:
+        stage = curriculum.stages[result.index]
+        rule = "-"
+        if stage.promote:
+            p = stage.promote
+            rule = f"{p.on} {'>=' if p.statistic == 'mean' else 'lower bound >='} {p.success:g}, {p.patience} pooled"
+        lines.append(
+            f"| {result.index + 1}. {result.name} | {rule} | {result.end - result.start:,} of "
+            f"{stage.budget.steps:,} | {result.ended} | {result.evaluations} | {_percent(result.rule_value)} | "
+            f"{result.wall_time / 60:.1f} min |"
+        )
+    total = state.results[-1].end if state.results else 0
+    status = "finished" if state.finished else "running"
+    if state.stopped_early:
+        status = "stopped: a budget ran out with on_budget: stop"
+    return lines + ["", f"Status: {status}. {total:,} environment steps in all. (Wall time is cumulative.)"]
+
+
+def _test_lines(tests: dict[int, tuple[str, dict[str, Any]]]) -> list[str]:
+    """The tables of the stages' ``test.json`` records, ``tests`` keyed by stage index."""
+    lines = [
+        "",
+        "## Test: held-out episodes",
+        "",
+        "Success with 95% Wilson interval (episodes). Nothing in the run was selected on these episodes. "
+        "Per kind and after a negation: success on the episodes in which that correction was spoken.",
+        "",
+        "| stage | agent | success | correction episodes | corrected | ambiguity | common ground | "
+        "instruction correction | wrong object | after a negation |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for index, (name, record) in tests.items():
+        lines += _test_rows(index, name, record)
+    language = next((record[LANGUAGE] for _, record in reversed(tests.values()) if LANGUAGE in record), None)
+    if language:
+        lines += [
+            "",
+            "## Language check: the final agent on plain test episodes",
+            "",
+            "`true`: the instructor's sentence; `blank`: no words; `other`: a sentence naming another object, "
+            "won when the task holds for that object. An agent that reads its instruction is near chance "
+            "with `blank` and about as good with `other` as with `true`.",
+            "",
+            "| instruction | success |",
+            "|---|---|",
+        ]
+        for shown, r in language.items():
+            overall = {"episodes": r["episodes"], "success": r["success"], "ci": r["success_ci"]}
+            lines.append(f"| {shown} | {_with_interval(overall)} |")
+    return lines
+
+
+def _test_rows(index: int, name: str, record: dict[str, Any]) -> list[str]:
+    rows = []
+    for agent in (LAST, BEST):
+        if agent not in record:
+            continue
+        r = record[agent]
+        overall = {"episodes": r["episodes"], "success": r["success"], "ci": r["success_ci"]}
+        episodes = {
+            "episodes": r["correction_episodes"],
+            "success": r["correction_episode_success"],
+            "ci": r["correction_episode_success_ci"],
+        }
+        kinds = [_with_count(r["by_kind"].get(kind.value, {}).get("corrected")) for kind in Kind]
+        rows.append(
+            f"| {index + 1}. {name} | {agent} ({r['checkpoint'].split('/')[-1]}) | {_with_interval(overall)} | "
+            f"{_with_interval(episodes)} | {_with_interval(r['corrected'])} | {' | '.join(kinds)} | "
+            f"{_with_count(r['by_negation']['with_negation'])} |"
+        )
+    return rows
+
+
+def _percent(value: float | None) -> str:
+    return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{100 * value:.0f}%"
+
+
+def _with_interval(rate: dict[str, Any]) -> str:
+    """A rate of a ``test.json`` record as ``92.0% [89.3, 94.1] (n)``, or ``-`` without episodes."""
+    if not rate["episodes"]:
+        return "-"
+    low, high = rate["ci"]
+    return f"{100 * rate['success']:.1f}% [{100 * low:.1f}, {100 * high:.1f}] ({rate['episodes']})"
+
+
+def _with_count(rate: dict[str, Any] | None) -> str:
+    return "-" if not rate or not rate["episodes"] else f"{100 * rate['success']:.0f}% ({rate['episodes']})"

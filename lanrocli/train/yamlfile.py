@@ -1,0 +1,215 @@
+"""Curriculum files as data: YAML with ``extends``, every key's line remembered, problems located.
+
+``extends: other.yaml`` (top level only; the path is relative to the directory of the file that names it)
+builds a file on top of another, in chains of any length. The merge rule: mappings merge key by key,
+recursively; every other value, lists included, replaces the parent's value wholesale. So a child that
+sets ``agent: {batch_size: 128}`` keeps the parent's other agent settings, while a child that sets
+``stages`` replaces all of the parent's stages: merging stage lists item by item would make the result
+depend on positions the child cannot see.
+
+Validation is a pydantic model's; what it finds wrong becomes a list of :class:`Problem`, each with its
+file, line and key path, so one edit fixes them all.
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+import typing
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NamedTuple, TypeVar
+
+import yaml
+from pydantic import BaseModel, ValidationError
+from pydantic_core import ErrorDetails
+
+KeyPath = tuple[str | int, ...]
+Model = TypeVar("Model", bound=BaseModel)
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong with a curriculum, located as precisely as the file allows."""
+
+    file: Path | str
+    line: int | None
+    path: str
+    message: str
+
+    def __str__(self) -> str:
+        where = str(self.file) if self.line is None else f"{self.file}:{self.line}"
+        return ": ".join(part for part in (where, self.path, self.message) if part)
+
+
+class CurriculumError(ValueError):
+    """A curriculum that cannot be used; ``problems`` lists everything found, not just the first."""
+
+    def __init__(self, problems: list[Problem]) -> None:
+        super().__init__("\n".join(str(problem) for problem in problems))
+        self.problems = problems
+
+
+EXTENDS = "extends"
+
+
+class _Mark(NamedTuple):
+    file: Path | str
+    line: int | None
+
+
+Marks = dict[KeyPath, _Mark]
+"""The file and line of every key and list item, by key path."""
+
+
+def read(path: Path) -> tuple[dict[str, Any], Marks]:
+    """The data of the YAML file at ``path`` merged onto the files it extends, and where each key is."""
+    return _resolve(path, (path.resolve(),), None)
+
+
+_BOOL_TAG = "tag:yaml.org,2002:bool"
+
+
+class _Loader(yaml.SafeLoader):
+    """Safe loading with YAML 1.2 booleans (only true/false). PyYAML follows YAML 1.1, where the key ``on``
+    of ``promote`` would load as the boolean True."""
+
+    yaml_implicit_resolvers = {
+        first: [(tag, regexp) for tag, regexp in resolvers if tag != _BOOL_TAG]
+        for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+    }
+
+
+_Loader.add_implicit_resolver(_BOOL_TAG, re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), list("tTfF"))
+
+
+def _resolve(path: Path, chain: tuple[Path, ...], named_at: _Mark | None) -> tuple[dict[str, Any], Marks]:
+    """``path`` merged onto the files it extends. ``chain`` holds the files being loaded, to find cycles;
+    ``named_at`` is the ``extends`` that named ``path``, where a file that cannot be read is reported."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeError) as error:
+        reason = "no such file" if isinstance(error, FileNotFoundError) else f"cannot read it: {error}"
+        if named_at is None:
+            raise CurriculumError([Problem(path, None, "", reason)]) from None
+        raise CurriculumError([Problem(named_at.file, named_at.line, EXTENDS, f"{path}: {reason}")]) from None
+    data, marks = parse(text, path)
+    if EXTENDS not in data:
+        return data, marks
+    parent_name = data.pop(EXTENDS)
+    here = marks.pop((EXTENDS,), _Mark(path, None))
+    if not isinstance(parent_name, str) or not parent_name:
+        raise CurriculumError([Problem(here.file, here.line, EXTENDS, "must name the YAML file to build on")])
+    parent = path.parent / parent_name
+    if parent.resolve() in chain:
+        cycle = " -> ".join(str(file) for file in (*chain, parent.resolve()))
+        message = f"extending {parent} makes a cycle: {cycle}"
+        raise CurriculumError([Problem(here.file, here.line, EXTENDS, message)])
+    parent_data, parent_marks = _resolve(parent, (*chain, parent.resolve()), here)
+    kept = {key: mark for key, mark in parent_marks.items() if not _replaced(key, parent_data, data)}
+    return _merge(parent_data, data), kept | marks
+
+
+def parse(text: str, file: Path | str) -> tuple[dict[str, Any], Marks]:
+    """The data of one YAML document, and the line of every key and list item in it."""
+    try:
+        data = yaml.load(text, Loader=_Loader)
+        node = yaml.compose(text, Loader=_Loader)
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        reason = getattr(error, "problem", None) or str(error)
+        line = None if mark is None else mark.line + 1
+        raise CurriculumError([Problem(file, line, "", f"invalid YAML: {reason}")]) from None
+    if not isinstance(data, dict):
+        found = "nothing" if data is None else f"a {type(data).__name__}"
+        raise CurriculumError([Problem(file, None, "", f"the top level must be a mapping of keys, found {found}")])
+    return data, _key_lines(node, file, ())
+
+
+def _key_lines(node: yaml.Node, file: Path | str, prefix: KeyPath) -> Marks:
+    marks: Marks = {}
+    if isinstance(node, yaml.MappingNode):
+        children = [((key.value,), key, value) for key, value in node.value if isinstance(key, yaml.ScalarNode)]
+    elif isinstance(node, yaml.SequenceNode):
+        children = [((index,), item, item) for index, item in enumerate(node.value)]
+    else:
+        return marks
+    for step, marked, value in children:
+        path = prefix + step
+        marks[path] = _Mark(file, marked.start_mark.line + 1)
+        marks.update(_key_lines(value, file, path))
+    return marks
+
+
+def _merge(parent: Any, child: Any) -> Any:
+    if isinstance(parent, dict) and isinstance(child, dict):
+        return {**parent, **{key: _merge(parent.get(key), value) for key, value in child.items()}}
+    return child
+
+
+def _replaced(path: KeyPath, parent: Any, child: Any) -> bool:
+    """Whether the child replaces the parent's value at ``path`` or above it, so the parent's line for
+    ``path`` no longer describes the merged data."""
+    for key in path:
+        if key not in child:
+            return False
+        parent, child = parent.get(key), child[key]
+        if not (isinstance(parent, dict) and isinstance(child, dict)):
+            return True
+    return False
+
+
+def validate(model: type[Model], data: dict[str, Any], marks: Marks, file: Path | str) -> Model:
+    """``data`` as ``model``, or a ``CurriculumError`` with every problem at the line that has it."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as error:
+        raise CurriculumError([_problem(model, details, marks, file) for details in error.errors()]) from None
+
+
+def _problem(root: type[BaseModel], details: ErrorDetails, marks: Marks, file: Path | str) -> Problem:
+    loc = tuple(details["loc"])
+    # The deepest key of the path that the file has: a missing key is reported at its parent.
+    where = next((marks[loc[:end]] for end in range(len(loc), 0, -1) if loc[:end] in marks), _Mark(file, None))
+    return Problem(where.file, where.line, _format_path(loc), _message(root, details))
+
+
+def _format_path(loc: KeyPath) -> str:
+    text = ""
+    for key in loc:
+        text += f"[{key}]" if isinstance(key, int) else f".{key}" if text else str(key)
+    return text
+
+
+def _message(root: type[BaseModel], details: ErrorDetails) -> str:
+    kind, loc, value = details["type"], details["loc"], details["input"]
+    if kind == "extra_forbidden":
+        model = _model_at(root, loc[:-1])
+        names = [] if model is None else list(model.model_fields) + ([EXTENDS] if model is root else [])
+        close = difflib.get_close_matches(str(loc[-1]), names, n=1)
+        return f"unknown key {loc[-1]!r}" + (f"; did you mean {close[0]!r}?" if close else "")
+    if kind == "missing":
+        return "required key is missing"
+    if kind == "value_error":
+        return str(details["ctx"]["error"])
+    if isinstance(value, (str, int, float)):
+        return f"{details['msg']}, got {value!r}"
+    return details["msg"]
+
+
+def _model_at(root: type[BaseModel], loc: KeyPath) -> type[BaseModel] | None:
+    """The model that the data at ``loc`` is validated as, to list the keys it allows."""
+    model: type[BaseModel] | None = root
+    for key in loc:
+        if isinstance(key, int):  # a list item: the model was already unwrapped from list[...]
+            continue
+        if model is None or key not in model.model_fields:
+            return None
+        model = _model_in(model.model_fields[key].annotation)
+    return model
+
+
+def _model_in(annotation: Any) -> type[BaseModel] | None:
+    if typing.get_origin(annotation) is None and isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    return next((model for arg in typing.get_args(annotation) if (model := _model_in(arg))), None)
