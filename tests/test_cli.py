@@ -122,6 +122,7 @@ def test_eval_writes_a_gif(tmp_path) -> None:
     assert result.exit_code == 0 and gif.stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_quick_training_run_then_eval_plot_and_refusals(tmp_path) -> None:
     """The README's first command, on the built-in curriculum, and what can be done with its run folder."""
     out = tmp_path / "run"
