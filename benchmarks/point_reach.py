@@ -5,7 +5,7 @@ different colours lie in a 30 x 30 cm area. The instruction names one by colour 
 and touching means coming within ``--radius`` of its centre. Observations have the environment's layout
 (arm 7 numbers, then 31 per object: position, offset from the hand, displacement, orientation,
 velocities, one-hot colour and shape), and the same agent, replay buffer and hindsight relabelling learn
-from them, with ``updates_per_step`` updates per step after 1000 random steps.
+from them, with one update per step after 1000 random steps.
 
 An episode takes microseconds instead of PyBullet's milliseconds, so in minutes it tells whether a change
 to the agent helps it choose the named object at all:
@@ -28,7 +28,7 @@ import numpy as np
 import torch
 from pydantic import ValidationError
 
-from lanrocli.agent import EpisodeData, ObjectLayout, ReplayBuffer, SACAgent
+from lanrocli.agent import BufferSettings, EpisodeData, ObjectLayout, ReplayBuffer, SACAgent
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE
 from lanrocli.language import COLOURS, SHAPES, ObjectProps, grammar_vocabulary
 from lanrocli.train.curriculum import AgentConfig
@@ -120,7 +120,7 @@ def main() -> None:
     layout = ObjectLayout(ARM_SIZE, OBJECT_SIZE, args.objects)
     agent = SACAgent(layout.size, 3, len(VOCABULARY), settings, seed=args.seed, layout=layout)
     buffer = ReplayBuffer(
-        settings.buffer_size, layout.size, 3, max_objects=args.objects, vocabulary=VOCABULARY, negations=False,
+        BufferSettings().size, layout.size, 3, max_objects=args.objects, vocabulary=VOCABULARY, negations=False,
         seed=args.seed,
     )
     collect_rng, learn_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(args.seed).spawn(2))
@@ -132,7 +132,7 @@ def main() -> None:
         agent.update_normalizer(data.observations)
         successes.append(success)
         if steps >= RANDOM_STEPS:
-            agent.learn(buffer, learn_rng, len(data) * settings.updates_per_step)
+            agent.learn(buffer, learn_rng, len(data))
         before, steps = steps, steps + len(data)
         if steps // EVAL_EVERY > before // EVAL_EVERY:
             evaluation = np.mean(

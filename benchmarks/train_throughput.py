@@ -45,7 +45,7 @@ class Stopwatch:
 
 def run_ours(steps: int, envs: int, learning_starts: int, seed: int, architecture: str) -> dict[str, float]:
     settings = TrainSettings(task="reach", env=EnvSettings(objects=2), seed=seed, envs=envs, learning_starts=learning_starts)
-    trainer = Trainer(settings, SACSettings(batch_size=256, updates_per_step=1, architecture=architecture))
+    trainer = Trainer(settings, SACSettings(batch_size=256, architecture=architecture))
     simulation, sampling, updating = Stopwatch(), Stopwatch(), Stopwatch()
     trainer.run(envs)  # start the environments before the clock
     collector = trainer._collector

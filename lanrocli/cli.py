@@ -394,8 +394,6 @@ def _load_plan(path: Path | None, quick: bool, seed: int | None, envs: int | Non
 
 
 def _print_plan(plan: Curriculum) -> None:
-    from lanrocli.agent import SACSettings
-
     console = Console()
     table = Table(title=f"{plan.name}: {plan.task}, seed {plan.seed}, {plan.envs} environments")
     for column in ("stage", "environment", "budget", "promotion", "when the budget runs out"):
@@ -414,13 +412,21 @@ def _print_plan(plan: Curriculum) -> None:
             stage.on_budget,
         )
     console.print(table)
-    changed = {k: v for k, v in plan.agent.settings().to_dict().items() if SACSettings().to_dict()[k] != v}
     console.print(f"at most {plan.total_steps:,} environment steps in all")
     console.print(
         f"evaluation: {plan.eval.episodes} fresh episodes every {plan.eval.every:,} steps of a stage, and at its end; "
         f"test: {plan.test.episodes} held-out episodes for each stage's last and best agents"
     )
-    console.print(f"agent: default settings (SACSettings){', except ' + str(changed) if changed else ''}")
+    for name, section in (("agent", plan.agent), ("buffer", plan.buffer)):
+        settings = section.settings()
+        default = type(settings)()
+        changed = {
+            f.name: getattr(settings, f.name)
+            for f in dataclasses.fields(settings)
+            if getattr(default, f.name) != getattr(settings, f.name)
+        }
+        console.print(f"{name}: default settings ({type(settings).__name__}){', except ' + str(changed) if changed else ''}")
+    console.print(f"{plan.updates_per_step} update(s) per environment step, from step {plan.learning_starts:,}")
 
 
 @app.command("train")

@@ -15,7 +15,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lanrocli.agent.buffer import Batch, ReplayBuffer
+from lanrocli.agent.buffer import Batch, BufferSettings, ReplayBuffer
 from lanrocli.agent.networks import Actor, Critic, LanguageEncoder, ObjectLayout, encode
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
@@ -23,6 +23,11 @@ from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 _FORMAT = 1
 
 logger = logging.getLogger(__name__)
+
+
+MOVED = ("buffer_size", "updates_per_step", "relabel_ratio", "relabel_corrections", "correction_share", "hindsight_share")
+"""Settings that agents saved by older versions hold, now ``BufferSettings`` (``buffer_size`` as ``size``)
+and ``TrainSettings.updates_per_step``."""
 
 
 @dataclass(frozen=True)
@@ -42,15 +47,12 @@ class SACSettings:
     gamma: float = 0.98
     polyak: float = 0.95
     """target <- polyak * target + (1 - polyak) * online, after every update."""
-    buffer_size: int = 1_000_000
     critics: int = 1
     """1 as in the paper; 2 for clipped double Q (the target takes the smaller)."""
     clip_target: bool = True
     """Clip Bellman targets to the returns eq. 1 allows, [-1 / (1 - gamma), 0], as HER does. Without it a
     critic extrapolates to positive values that no episode can earn, the actor chases them, and the
     values diverge within tens of thousands of steps (measured on reach with 1 and with 2 critics)."""
-    updates_per_step: int = 1
-    """Gradient updates per collected environment step; read by the training loop."""
     embedding_size: int = 32
     language_size: int = 32
     """GRU hidden size: the length of the sentence summary."""
@@ -78,18 +80,6 @@ class SACSettings:
     """Normalised observations are clipped to +-obs_clip."""
     obs_var_eps: float = 1e-4
     """Added to the observation variance: a feature that barely varies is scaled by at most 100."""
-    relabel_ratio: float = 0.8
-    """Probability that a sampled transition is relabelled, where its episode achieved the task on some
-    object at that step or later."""
-    relabel_corrections: bool = True
-    correction_share: float = 0.5
-    """With ``relabel_corrections``, the share of relabelled sentences that are corrections."""
-    hindsight_share: float = 0.5
-    """Share of each batch drawn from the transitions that relabelling can turn into successes (their episode
-    achieves the task on some object at that step or later); the rest is drawn uniformly. Sparse tasks need
-    it: when random arms touched an object in 8% of reach episodes, mostly within a few steps, 1.5% of the
-    stored transitions could be relabelled at all; uniform batches held half a success on average, and the
-    critic valued the touching step itself at -13 instead of 0 after 130k steps."""
 
     ARCHITECTURE: ClassVar[tuple[str, ...]] = (
         "critics", "embedding_size", "language_size", "obs_size", "hidden_size", "hidden_layers", "architecture",
@@ -109,18 +99,18 @@ class SACSettings:
             raise ValueError("gamma and polyak must lie in [0, 1]")
         if self.grounding < 0.0:
             raise ValueError(f"grounding must not be negative, got {self.grounding}")
-        for name in ("relabel_ratio", "correction_share", "hindsight_share"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
-        if self.batch_size < 1 or self.hidden_layers < 0 or self.updates_per_step < 0:
-            raise ValueError("batch_size must be positive and hidden_layers, updates_per_step not negative")
+        if self.batch_size < 1 or self.hidden_layers < 0:
+            raise ValueError("batch_size must be positive and hidden_layers not negative")
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> SACSettings:
+        """Settings from plain data. An agent saved by an older version also holds the settings that are now
+        the buffer's and the training loop's (``MOVED``); they are left out here."""
         known = {f.name for f in dataclasses.fields(cls)}
+        data = {key: value for key, value in data.items() if key not in MOVED}
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"unknown SAC settings: {', '.join(unknown)}")
@@ -322,18 +312,20 @@ class SACAgent:
             loss = loss + F.cross_entropy(chosen.flatten(0, 1), named.repeat(chosen.shape[0]))
         return loss
 
-    def learn(self, buffer: ReplayBuffer, rng: np.random.Generator, n_updates: int) -> dict[str, float]:
-        """``n_updates`` updates on batches sampled (and relabelled per the settings) from ``buffer``;
+    def learn(
+        self,
+        buffer: ReplayBuffer,
+        rng: np.random.Generator,
+        n_updates: int,
+        sampling: BufferSettings = BufferSettings(),
+    ) -> dict[str, float]:
+        """``n_updates`` updates on batches sampled (and relabelled) from ``buffer`` as ``sampling`` says;
         returns the metrics averaged over them."""
-        s = self.settings
-        share = s.correction_share if s.relabel_corrections else 0.0
         totals: dict[str, float] = {}
         if n_updates < 1:
             return totals
         for _ in range(n_updates):
-            batch = buffer.sample(
-                s.batch_size, rng, relabel_ratio=s.relabel_ratio, correction_share=share, hindsight_share=s.hindsight_share
-            )
+            batch = buffer.sample(self.settings.batch_size, rng, **sampling.sampling())
             for name, value in self.update(batch).items():
                 totals[name] = totals.get(name, 0.0) + value
         return {name: value / n_updates for name, value in totals.items()}

@@ -7,7 +7,8 @@ that (see :mod:`lanrocli.train.runfolder`). Loading uses ``torch.load(weights_on
 ``np.load(allow_pickle=False)``, so a file from a stranger cannot run code.
 
 Files written by older versions load too: their ``state.json`` also holds ``agent_settings``, a second copy
-of the settings that ``agent.pt`` holds, which is ignored.
+of the settings that ``agent.pt`` holds, which is ignored; and their agent's settings hold those of the
+replay buffer and the training loop, which are read into the training settings.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import numpy as np
 import torch
 
 from lanrocli.agent import ReplayBuffer, SACSettings
+from lanrocli.agent.sac import MOVED
 from lanrocli.train.runfolder import LATEST, CheckpointError, fsync_dir, fsync_file, read_pointer, temporary
 
 AGENT_FILE = "agent.pt"
@@ -142,9 +144,10 @@ def load_checkpoint(directory: Path, device: str | torch.device = "cpu", resumab
                 "(a 'best' checkpoint holds the agent only, for evaluation)"
             )
     state = _load_state(directory)
+    agent = load_agent_state(directory, device)
     return Checkpoint(
-        agent=load_agent_state(directory, device),
-        train_settings=state["train_settings"],
+        agent=agent,
+        train_settings=_train_settings(state["train_settings"], agent["settings"]),
         vocabulary=state["vocabulary"],
         progress=state["progress"],
         rng=state_from_json(state["rng"]),
@@ -154,6 +157,17 @@ def load_checkpoint(directory: Path, device: str | torch.device = "cpu", resumab
         partials=_read_partials(directory / PARTIAL_FILE) if resumable else None,
         environments=state["environments"] if resumable else None,
     )
+
+
+def _train_settings(saved: dict[str, Any], agent_settings: dict[str, Any]) -> dict[str, Any]:
+    """The training settings of a checkpoint. One written before the replay buffer's and the training loop's
+    settings left the agent's keeps them among the agent's settings, and they are read from there."""
+    if "buffer" in saved:
+        return saved
+    moved = {name: agent_settings[name] for name in MOVED if name in agent_settings}
+    loop = {"updates_per_step": moved.pop("updates_per_step")} if "updates_per_step" in moved else {}
+    buffer = {"size" if name == "buffer_size" else name: value for name, value in moved.items()}
+    return {**saved, **loop, "buffer": buffer}
 
 
 def load_agent_state(directory: Path, device: str | torch.device = "cpu") -> dict[str, Any]:

@@ -21,7 +21,8 @@ from typing import Any, ClassVar, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, create_model, field_validator, model_validator
 
-from lanrocli.agent import SACSettings
+from lanrocli.agent import BufferSettings, SACSettings
+from lanrocli.agent.sac import MOVED
 from lanrocli.choices import Task
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.seeds import FIELD
@@ -76,6 +77,7 @@ def _section(settings_class: type, name: str, base: type[_Settings]) -> type[_Se
 
 
 AgentConfig = _section(SACSettings, "AgentConfig", _Settings)
+BufferConfig = _section(BufferSettings, "BufferConfig", _KeyByKey)
 EnvConfig = _section(EnvSettings, "EnvConfig", _KeyByKey)
 
 
@@ -168,10 +170,36 @@ class Curriculum(BaseModel):
     """Parallel environments collecting experience."""
     learning_starts: int = Field(1000, ge=0)
     """Environment steps collected, by the untrained policy, before the first update."""
+    updates_per_step: int = Field(1, ge=0)
+    """Gradient updates per collected environment step."""
     agent: AgentConfig = Field(default_factory=AgentConfig)
+    buffer: BufferConfig = Field(default_factory=BufferConfig)
     eval: EvalConfig = Field(default_factory=EvalConfig)
     test: HeldOutConfig = Field(default_factory=HeldOutConfig)
     stages: list[Stage]
+
+    @model_validator(mode="before")
+    @classmethod
+    def _moved_out_of_agent(cls, data: Any) -> Any:
+        """Read the settings that left ``agent`` (the replay buffer's and the loop's) where they are now."""
+        agent = data.get("agent") if isinstance(data, dict) else None
+        moved = [name for name in MOVED if isinstance(agent, dict) and name in agent]
+        if not moved:
+            return data
+        warnings.warn(
+            f"agent keys {', '.join(moved)} are read as buffer.size (for buffer_size), buffer.* and the top-level "
+            "updates_per_step, where they belong now; move them there",
+            FutureWarning,
+            stacklevel=2,
+        )
+        buffer = dict(data.get("buffer") or {})
+        data = {**data, "agent": {key: value for key, value in agent.items() if key not in MOVED}}
+        for name in moved:
+            if name == "updates_per_step":
+                data.setdefault(name, agent[name])
+            else:
+                buffer.setdefault("size" if name == "buffer_size" else name, agent[name])
+        return {**data, "buffer": buffer}
 
     @field_validator("stages")
     @classmethod
@@ -211,7 +239,7 @@ class Curriculum(BaseModel):
         data["eval"]["episodes"] = min(data["eval"]["episodes"], 5)
         data["test"]["episodes"] = min(data["test"]["episodes"], QUICK_TEST_EPISODES)
         data["learning_starts"] = min(data["learning_starts"], 256)
-        data["agent"]["buffer_size"] = min(data["agent"]["buffer_size"], 100_000)
+        data["buffer"]["size"] = min(data["buffer"]["size"], 100_000)
         return validate(Curriculum, data, {}, "<quick>")
 
     def with_overrides(self, seed: int | None = None, envs: int | None = None) -> Curriculum:

@@ -169,6 +169,8 @@ class CurriculumRun:
             envs=curriculum.envs,
             eval_episodes=curriculum.eval.episodes,
             learning_starts=curriculum.learning_starts,
+            updates_per_step=curriculum.updates_per_step,
+            buffer=curriculum.buffer.settings(),
             object_slots=curriculum.max_objects,
             stage=0,
         )

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from lanrocli.agent import ObjectLayout, ReplayBuffer, SACAgent, SACSettings
+from lanrocli.agent import BufferSettings, ObjectLayout, ReplayBuffer, SACAgent, SACSettings
 from lanrocli.choices import Task
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
 from lanrocli.envs.evaluation import EvaluationReport, evaluate
@@ -46,6 +46,9 @@ class TrainSettings:
     eval_episodes: int = 20
     learning_starts: int = 1000
     """Environment steps collected before the first update."""
+    updates_per_step: int = 1
+    """Gradient updates per collected environment step."""
+    buffer: BufferSettings = field(default_factory=BufferSettings)
     object_slots: int | None = None
     """Objects the observation and the buffer have room for; ``None``: the stage's objects. A curriculum
     sets the most objects of any of its stages, so one network serves all of them."""
@@ -57,6 +60,8 @@ class TrainSettings:
             raise ValueError(f"envs must be at least 1, got {self.envs}")
         if self.eval_episodes < 1:
             raise ValueError("eval_episodes must be positive")
+        if self.updates_per_step < 0:
+            raise ValueError(f"updates_per_step must not be negative, got {self.updates_per_step}")
         if self.learning_starts < 0:
             raise ValueError(f"learning_starts must not be negative, got {self.learning_starts}")
         object.__setattr__(self, "task", Task(self.task))
@@ -79,7 +84,7 @@ class TrainSettings:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> TrainSettings:
-        return cls(**{**data, "env": EnvSettings(**data["env"])})
+        return cls(**{**data, "env": EnvSettings(**data["env"]), "buffer": BufferSettings(**data.get("buffer", {}))})
 
 
 def pick_device(requested: str | None) -> torch.device:
@@ -157,7 +162,7 @@ class Trainer:
             obs_dim, action_dim, len(self.vocabulary), agent_settings, settings.seed, self.device, layout
         )
         self.buffer = ReplayBuffer(
-            agent_settings.buffer_size,
+            settings.buffer.size,
             obs_dim,
             action_dim,
             max_objects=settings.slots,
@@ -200,16 +205,16 @@ class Trainer:
     ) -> bool:
         """Collect and learn until ``until`` environment steps in total; False if ``should_stop`` ended it
         early (checked before every step)."""
-        s, a = self.settings, self.agent_settings
+        s = self.settings
         collector = self._ensure_collector()
         while self.progress.env_steps < until:
             if should_stop():
                 return False
             actions = self.agent.act(collector.observation)
             collector.step_async(actions)
-            if self.buffer.size >= max(s.learning_starts, 1) and a.updates_per_step > 0:
-                n = a.updates_per_step * s.envs
-                self.last_metrics = self.agent.learn(self.buffer, self.rng, n)
+            if self.buffer.size >= max(s.learning_starts, 1) and s.updates_per_step > 0:
+                n = s.updates_per_step * s.envs
+                self.last_metrics = self.agent.learn(self.buffer, self.rng, n, s.buffer)
                 self.progress.updates += n
             for episode in collector.step_wait():
                 self.buffer.add_episode(episode.data)

@@ -11,7 +11,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from lanrocli.agent import Batch, ObjectLayout, ReplayBuffer, SACAgent, SACSettings
+from lanrocli.agent import Batch, BufferSettings, ObjectLayout, ReplayBuffer, SACAgent, SACSettings
 
 from .episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
 
@@ -334,7 +334,7 @@ def test_settings_reject_nonsense_and_round_trip_as_plain_data() -> None:
     with pytest.raises(ValueError):
         SACSettings(critics=3)
     with pytest.raises(ValueError):
-        SACSettings(relabel_ratio=1.5)
+        BufferSettings(relabel_ratio=1.5)
     settings = SACSettings(critics=2, max_grad_norm=1.0)
     assert SACSettings.from_dict(dataclasses.asdict(settings)) == settings
     with pytest.raises(ValueError, match="unknown"):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from lanrocli.agent import EpisodeData, ReplayBuffer, SACAgent, SACSettings
+from lanrocli.agent import BufferSettings, EpisodeData, ReplayBuffer, SACAgent, SACSettings
 from lanrocli.language import COLOURS, SHAPES, ObjectProps, grammar_vocabulary
 from lanrocli.train.checkpoint import (
     AGENT_FILE,
@@ -25,7 +25,8 @@ from lanrocli.train.trainer import Trainer, TrainSettings, load_policy
 
 VOCABULARY = grammar_vocabulary()
 OBS_DIM, ACTION_DIM = 6, 3
-SMALL = SACSettings(hidden_size=16, obs_size=16, buffer_size=20)
+SMALL = SACSettings(hidden_size=16, obs_size=16)
+BUFFER_SIZE = 20
 
 
 def episode(rng: np.random.Generator, steps: int) -> EpisodeData:
@@ -48,7 +49,7 @@ def episode(rng: np.random.Generator, steps: int) -> EpisodeData:
 
 def contents(resumable: bool = True) -> Checkpoint:
     rng = np.random.default_rng(3)
-    buffer = ReplayBuffer(SMALL.buffer_size, OBS_DIM, ACTION_DIM, max_objects=2, vocabulary=VOCABULARY, seed=1)
+    buffer = ReplayBuffer(BUFFER_SIZE, OBS_DIM, ACTION_DIM, max_objects=2, vocabulary=VOCABULARY, seed=1)
     for _ in range(4):
         buffer.add_episode(episode(rng, 7))  # 28 steps in a ring of 20: it wraps
     rng.random(5)  # a generator state away from the seed's
@@ -62,7 +63,7 @@ def contents(resumable: bool = True) -> Checkpoint:
         }
     return Checkpoint(
         agent=agent.state_dict(),
-        train_settings={"task": "push"},
+        train_settings=TrainSettings(task="push").to_dict(),
         vocabulary=VOCABULARY.to_dict(),
         progress={"env_steps": 28},
         rng=rng.bit_generator.state,
@@ -129,8 +130,8 @@ def test_random_states_survive_json() -> None:
 def test_checkpoints_that_hold_a_second_copy_of_the_agent_settings_still_load(tmp_path: Path) -> None:
     """Older versions also wrote the agent's settings to ``state.json``: such checkpoints resume and
     evaluate, reading the settings from ``agent.pt``, the one copy now written."""
-    agent = SACSettings(hidden_size=16, obs_size=16, buffer_size=500)
-    trainer = Trainer(TrainSettings(task="reach", learning_starts=10_000), agent)
+    agent = SACSettings(hidden_size=16, obs_size=16)
+    trainer = Trainer(TrainSettings(task="reach", learning_starts=10_000, buffer=BufferSettings(size=500)), agent)
     trainer.run(3)
     directory = trainer.save(tmp_path / "step-3")
     trainer.close()
@@ -150,3 +151,27 @@ def test_checkpoints_that_hold_a_second_copy_of_the_agent_settings_still_load(tm
     path.write_text(json.dumps({**older, "agent_settings": {**agent.to_dict(), "hidden_size": 32}}))
     assert Trainer.load(directory)[0].agent.settings == agent
     assert load_policy(directory)[1].agent.settings == agent
+
+
+def test_checkpoints_whose_agent_held_the_buffer_and_loop_settings_still_load(tmp_path: Path) -> None:
+    """Older versions kept the buffer's and the loop's settings among the agent's: a resumed run reads them
+    from there, and the agent loads without them."""
+    trainer = Trainer(TrainSettings(task="reach", learning_starts=10_000), SACSettings(hidden_size=16, obs_size=16))
+    trainer.run(3)
+    directory = trainer.save(tmp_path / "step-3")
+    trainer.close()
+    agent_state = torch.load(directory / AGENT_FILE, weights_only=True)
+    old = {"buffer_size": 700, "updates_per_step": 2, "relabel_ratio": 0.6, "relabel_corrections": False,
+           "correction_share": 0.5, "hindsight_share": 0.25}
+    agent_state["settings"] = {**agent_state["settings"], **old}
+    torch.save(agent_state, directory / AGENT_FILE)
+    state = json.loads((directory / STATE_FILE).read_text())
+    train = state["train_settings"]
+    del train["buffer"], train["updates_per_step"]
+    (directory / STATE_FILE).write_text(json.dumps(state))
+
+    resumed, _ = Trainer.load(directory)
+    expected = BufferSettings(size=700, relabel_ratio=0.6, relabel_corrections=False, hindsight_share=0.25)
+    assert resumed.settings.buffer == expected and resumed.settings.updates_per_step == 2
+    assert resumed.agent.settings == SACSettings(hidden_size=16, obs_size=16)
+    resumed.close()

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from lanrocli.agent import SACSettings
+from lanrocli.agent import BufferSettings, SACSettings
 from lanrocli.choices import Kind, Mode, Task
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.language import TASKS
@@ -367,7 +367,7 @@ def test_quick_caps_budgets_and_evaluation(tmp_path: Path) -> None:
     assert [stage.budget.steps for stage in quick.stages] == [1500, 1000]
     assert (quick.eval.every, quick.eval.episodes, quick.learning_starts) == (500, 5, 256)
     assert (curriculum.test.episodes, quick.test.episodes) == (500, QUICK_TEST_EPISODES)
-    assert quick.agent.buffer_size == 100_000 and quick.agent.batch_size == 64
+    assert quick.buffer.size == 100_000 and quick.agent.batch_size == 64
     assert curriculum.stages[0].budget.steps == 50000  # the original is untouched
 
 
@@ -412,3 +412,19 @@ def test_diff_curricula(tmp_path: Path) -> None:
 def test_curriculum_model_is_usable_without_a_file() -> None:
     curriculum = Curriculum.model_validate({"name": "x", "task": "lift", "stages": [{"name": "s", "budget": {"steps": 1}}]})
     assert curriculum.stages[0].env.objects == 2
+
+
+def test_buffer_and_loop_settings_have_their_own_keys(tmp_path: Path) -> None:
+    curriculum = load_curriculum(write(tmp_path, "c.yaml", MINIMAL + "buffer: {size: 5000}\nupdates_per_step: 2\n"))
+    assert curriculum.buffer.settings() == BufferSettings(size=5000) and curriculum.updates_per_step == 2
+    problem = only_problem(write(tmp_path, "bad.yaml", MINIMAL + "buffer:\n  size: 100\n  hindsight_share: 2\n"))
+    assert (problem.line, problem.path) == (8, "buffer.hindsight_share")
+
+
+def test_buffer_and_loop_settings_under_agent_are_read_with_a_warning(tmp_path: Path) -> None:
+    """Curricula, and the config.yaml of runs, written when these settings were the agent's still load."""
+    text = MINIMAL + "agent: {critics: 2, buffer_size: 5000, updates_per_step: 2, hindsight_share: 0.3}\n"
+    with pytest.warns(FutureWarning, match="buffer_size, updates_per_step, hindsight_share"):
+        curriculum = load_curriculum(write(tmp_path, "c.yaml", text))
+    assert curriculum.buffer.settings() == BufferSettings(size=5000, hindsight_share=0.3)
+    assert curriculum.updates_per_step == 2 and curriculum.agent.settings() == SACSettings(critics=2)

@@ -28,7 +28,8 @@ task: reach
 seed: 5
 envs: {envs}
 learning_starts: 40
-agent: {{batch_size: 16, buffer_size: 4000}}
+agent: {{batch_size: 16}}
+buffer: {{size: 4000}}
 eval: {{every: 40, episodes: 2}}
 test: {{episodes: 2}}
 stages:

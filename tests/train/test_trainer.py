@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import torch
 
-from lanrocli.agent import SACSettings
+from lanrocli.agent import BufferSettings, SACSettings
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.checkpoint import AGENT_FILE, load_agent_state
 from lanrocli.train.runfolder import LATEST, CheckpointError, read_pointer
@@ -27,8 +27,9 @@ SETTINGS = TrainSettings(
     envs=1,
     eval_episodes=2,
     learning_starts=64,
+    buffer=BufferSettings(size=5000),
 )
-AGENT = SACSettings(buffer_size=5000, batch_size=32)
+AGENT = SACSettings(batch_size=32)
 
 
 def parameters(trainer: Trainer) -> list[torch.Tensor]:
@@ -110,12 +111,12 @@ def test_entering_a_stage_changes_the_environments_and_keeps_the_learning() -> N
 WRITER = """
 import sys
 from pathlib import Path
-from lanrocli.agent import SACSettings
+from lanrocli.agent import BufferSettings, SACSettings
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.runfolder import LATEST, prune, write_pointer
 from lanrocli.train.trainer import Trainer, TrainSettings
 out = Path(sys.argv[1])
-trainer = Trainer(TrainSettings(task="reach", env=EnvSettings(objects=2), learning_starts=10_000), SACSettings(buffer_size=2000))
+trainer = Trainer(TrainSettings(task="reach", env=EnvSettings(objects=2), learning_starts=10_000, buffer=BufferSettings(size=2000)), SACSettings())
 while True:
     trainer.run(trainer.progress.env_steps + 1)
     directory = trainer.save(out / f"step-{trainer.progress.env_steps:06d}")
