@@ -21,7 +21,7 @@ from typing import Any
 
 import torch
 
-from lanrocli.agent import SACSettings
+from lanrocli.agent.settings import SACSettings
 from lanrocli.display import StopRequest
 from lanrocli.train.curriculum import Curriculum
 from lanrocli.train.pipeline import CurriculumRun, RunObserver

@@ -28,7 +28,10 @@ import numpy as np
 import torch
 from pydantic import ValidationError
 
-from lanrocli.agent import BufferSettings, EpisodeData, ObjectLayout, ReplayBuffer, SACAgent
+from lanrocli.agent.buffer import EpisodeData, ReplayBuffer
+from lanrocli.agent.networks import ObjectLayout
+from lanrocli.agent.sac import SACAgent
+from lanrocli.agent.settings import BufferSettings
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE
 from lanrocli.language import COLOURS, SHAPES, ObjectProps, grammar_vocabulary
 from lanrocli.train.curriculum import AgentConfig

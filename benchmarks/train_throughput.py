@@ -20,7 +20,7 @@ from typing import Any
 
 import torch
 
-from lanrocli.agent import SACSettings
+from lanrocli.agent.settings import SACSettings
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.trainer import Trainer, TrainSettings

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import numpy as np
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from lanrocli import __version__
@@ -43,8 +44,9 @@ err_console = Console(stderr=True, soft_wrap=True)
 
 
 def fail(message: str, code: int = 2) -> typer.Exit:
-    """Print ``message`` as an error on stderr and return the exit to raise."""
-    err_console.print(f"[bold red]error:[/] {message}")
+    """Print ``message`` as an error on stderr and return the exit to raise. The message is escaped, not read
+    as rich markup: it quotes files, keys and values, where ``[/x]`` would otherwise raise a MarkupError."""
+    err_console.print(f"[bold red]error:[/] {escape(message)}")
     return typer.Exit(code)
 
 
@@ -384,7 +386,7 @@ def _load_plan(path: Path | None, quick: bool, seed: int | None, envs: int | Non
             warnings.simplefilter("always", FutureWarning)
             plan = load_curriculum(path) if path is not None else builtin_curriculum()
         for warning in caught:
-            err_console.print(f"[bold yellow]warning:[/] {path}: {warning.message}")
+            err_console.print(f"[bold yellow]warning:[/] {escape(f'{path}: {warning.message}')}")
     except CurriculumError as error:
         count = len(error.problems)
         raise fail(f"{count} problem{'s' if count > 1 else ''} in the curriculum:\n{error}") from None

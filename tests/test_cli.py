@@ -204,7 +204,7 @@ UNSERVED_DEVICES = [
 @pytest.fixture(scope="module")
 def untrained_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A checkpoint that loads: a device problem is then the only thing wrong with an eval."""
-    from lanrocli.agent import BufferSettings, SACSettings
+    from lanrocli.agent.settings import BufferSettings, SACSettings
     from lanrocli.train.trainer import Trainer, TrainSettings
 
     trainer = Trainer(TrainSettings(task="reach", buffer=BufferSettings(size=10)), SACSettings(hidden_size=16, obs_size=16))

@@ -107,43 +107,6 @@ def _layout(obs_dim: int, action_dim: int, max_objects: int, length: int) -> dic
     }
 
 
-@dataclass(frozen=True)
-class BufferSettings:
-    """How many transitions the replay buffer keeps and how its batches are drawn and relabelled.
-
-    Defaults are the paper's buffer size and those of the hindsight relabelling it builds on."""
-
-    size: int = 1_000_000
-    """Transitions kept; the oldest whole episodes make room for new ones."""
-    relabel_ratio: float = 0.8
-    """Probability that a sampled transition is relabelled, where its episode achieved the task on some
-    object at that step or later."""
-    relabel_corrections: bool = True
-    correction_share: float = 0.5
-    """With ``relabel_corrections``, the share of relabelled sentences that are corrections."""
-    hindsight_share: float = 0.5
-    """Share of each batch drawn from the transitions that relabelling can turn into successes (their episode
-    achieves the task on some object at that step or later); the rest is drawn uniformly. Sparse tasks need
-    it: when random arms touched an object in 8% of reach episodes, mostly within a few steps, 1.5% of the
-    stored transitions could be relabelled at all; uniform batches held half a success on average, and the
-    critic valued the touching step itself at -13 instead of 0 after 130k steps."""
-
-    def __post_init__(self) -> None:
-        if not 1 <= self.size < 2**31:
-            raise ValueError(f"size must be a positive number of transitions below 2**31, got {self.size}")
-        for name in ("relabel_ratio", "correction_share", "hindsight_share"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
-
-    def sampling(self) -> dict[str, float]:
-        """The keyword arguments of :meth:`ReplayBuffer.sample` these settings ask for."""
-        return {
-            "relabel_ratio": self.relabel_ratio,
-            "correction_share": self.correction_share if self.relabel_corrections else 0.0,
-            "hindsight_share": self.hindsight_share,
-        }
-
-
 class ReplayBuffer:
     """Episodes in a ring of ``capacity`` transitions, with hindsight language relabelling.
 

@@ -1,4 +1,5 @@
-"""Soft Actor-Critic for language-conditioned goals, with the paper's hyperparameters as defaults."""
+"""Soft Actor-Critic for language-conditioned goals. Its settings, the paper's hyperparameters by default,
+live in :mod:`lanrocli.agent.settings`, which needs no torch."""
 
 from __future__ import annotations
 
@@ -7,114 +8,22 @@ import dataclasses
 import logging
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any, ClassVar, Literal
+from typing import Any
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lanrocli.agent.buffer import Batch, BufferSettings, ReplayBuffer
+from lanrocli.agent.buffer import Batch, ReplayBuffer
 from lanrocli.agent.networks import Actor, Critic, LanguageEncoder, ObjectLayout, encode
 from lanrocli.agent.normalizer import RunningNormalizer
+from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 
 _FORMAT = 1
 
 logger = logging.getLogger(__name__)
-
-
-MOVED = ("buffer_size", "updates_per_step", "relabel_ratio", "relabel_corrections", "correction_share", "hindsight_share")
-"""Settings that agents saved by older versions hold, now ``BufferSettings`` (``buffer_size`` as ``size``)
-and ``TrainSettings.updates_per_step``."""
-
-
-@dataclass(frozen=True)
-class SACSettings:
-    """Every number of the agent. Defaults are the paper's (its appendix, table of hyperparameters) where it
-    gives one, else those of the SAC baseline it builds on."""
-
-    batch_size: int = 256
-    actor_lr: float = 1e-3
-    critic_lr: float = 1e-3
-    alpha_lr: float = 1e-3
-    alpha: float = 0.2
-    """Entropy temperature; the initial value when ``autotune_alpha``."""
-    autotune_alpha: bool = True
-    target_entropy: float | None = None
-    """Entropy the temperature tuning aims at; ``None`` means -action_dim."""
-    gamma: float = 0.98
-    polyak: float = 0.95
-    """target <- polyak * target + (1 - polyak) * online, after every update."""
-    critics: int = 1
-    """1 as in the paper; 2 for clipped double Q (the target takes the smaller)."""
-    clip_target: bool = True
-    """Clip Bellman targets to the returns eq. 1 allows, [-1 / (1 - gamma), 0], as HER does. Without it a
-    critic extrapolates to positive values that no episode can earn, the actor chases them, and the
-    values diverge within tens of thousands of steps (measured on reach with 1 and with 2 critics)."""
-    embedding_size: int = 32
-    language_size: int = 32
-    """GRU hidden size: the length of the sentence summary."""
-    obs_size: int = 128
-    """Width of the observation layer, and of the attention's keys and queries (objects)."""
-    hidden_size: int = 256
-    hidden_layers: int = 1
-    architecture: Literal["flat", "objects"] = "flat"
-    """``flat``: the observation through one layer, joined with the sentence summary (the paper's baseline);
-    ``objects``: attention of the sentence summary over the objects picks the named one, and the observation
-    layer reads the arm's features and that object's. Needs the observation's layout (:class:`ObjectLayout`)."""
-    grounding: float = 1.0
-    """Weight of an auxiliary loss for ``architecture: objects``: the cross-entropy between each reader's
-    attention over the objects and the object a relabelled sentence singles out (which the buffer knows,
-    since it chose the sentence for that object). It teaches actor and critic which object a sentence
-    names directly, rather than only through the small differences it makes to Bellman targets. 0 turns
-    it off."""
-    share_encoder: bool = False
-    """One sentence encoder for actor and critic, trained by the critic's loss only."""
-    max_grad_norm: float | None = None
-    """Clip each network's gradient to this norm; ``None`` leaves gradients as they are."""
-    log_std_min: float = -20.0
-    log_std_max: float = 2.0
-    obs_clip: float = 5.0
-    """Normalised observations are clipped to +-obs_clip."""
-    obs_var_eps: float = 1e-4
-    """Added to the observation variance: a feature that barely varies is scaled by at most 100."""
-
-    ARCHITECTURE: ClassVar[tuple[str, ...]] = (
-        "critics", "embedding_size", "language_size", "obs_size", "hidden_size", "hidden_layers", "architecture",
-        "share_encoder", "autotune_alpha",
-    )
-    """The settings that shape the networks and the optimiser's state: a saved agent loads only into one
-    that agrees on them."""
-
-    def __post_init__(self) -> None:
-        if self.architecture not in ("flat", "objects"):
-            raise ValueError(f"architecture must be 'flat' or 'objects', got {self.architecture!r}")
-        if self.critics not in (1, 2):
-            raise ValueError(f"critics must be 1 or 2, got {self.critics}")
-        if self.alpha <= 0.0:
-            raise ValueError(f"alpha must be positive, got {self.alpha}")
-        if not 0.0 <= self.polyak <= 1.0 or not 0.0 <= self.gamma <= 1.0:
-            raise ValueError("gamma and polyak must lie in [0, 1]")
-        if self.grounding < 0.0:
-            raise ValueError(f"grounding must not be negative, got {self.grounding}")
-        if self.batch_size < 1 or self.hidden_layers < 0:
-            raise ValueError("batch_size must be positive and hidden_layers not negative")
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> SACSettings:
-        """Settings from plain data. An agent saved by an older version also holds the settings that are now
-        the buffer's and the training loop's (``MOVED``); they are left out here."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        data = {key: value for key, value in data.items() if key not in MOVED}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise ValueError(f"unknown SAC settings: {', '.join(unknown)}")
-        return cls(**data)
 
 
 class SACAgent:

@@ -24,8 +24,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from lanrocli.agent import ReplayBuffer, SACSettings
-from lanrocli.agent.sac import MOVED
+from lanrocli.agent.buffer import ReplayBuffer
+from lanrocli.agent.settings import MOVED, SACSettings
 from lanrocli.train.runfolder import LATEST, CheckpointError, fsync_dir, fsync_file, read_pointer, temporary
 
 AGENT_FILE = "agent.pt"

@@ -21,8 +21,7 @@ from typing import Any, ClassVar, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, create_model, field_validator, model_validator
 
-from lanrocli.agent import BufferSettings, SACSettings
-from lanrocli.agent.sac import MOVED
+from lanrocli.agent.settings import MOVED, BufferSettings, SACSettings
 from lanrocli.choices import Task
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.seeds import FIELD

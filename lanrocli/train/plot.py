@@ -10,6 +10,7 @@ them was evaluated; a run does not count beyond its last evaluation. Stage bound
 from __future__ import annotations
 
 import csv
+import io
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,21 +41,67 @@ def read_run(run: Path) -> Curve:
     path = run / METRICS if run.is_dir() else run
     if not path.is_file():
         raise FileNotFoundError(f"{run} has no {METRICS}: is it a run folder written by 'lanro train'?")
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
+    header, rows = _table(path)
     if not rows:
         raise ValueError(f"{path} has no evaluations yet")
-    steps = np.array([int(r["env_steps"]) for r in rows])
+    steps = np.array([_number(path, line, row, "env_steps", int) for line, row in rows])
     values = {}
     for column, _ in PANELS:
-        source = column if column in rows[0] else OLD_COLUMNS.get(column, column)
-        values[column] = np.array([float(r[source]) if r.get(source) else np.nan for r in rows])
+        source = column if column in header else OLD_COLUMNS.get(column, column)
+        values[column] = np.array(
+            [_number(path, line, row, source, float) if row.get(source) else np.nan for line, row in rows]
+        )
     boundaries = [
-        (int(prev["env_steps"]), row["stage_name"])
-        for prev, row in zip(rows, rows[1:])
-        if row.get("stage") != prev.get("stage")
+        (int(steps[index]), row["stage_name"])
+        for index, ((_, prev), (_, row)) in enumerate(zip(rows, rows[1:]))
+        if row["stage"] != prev["stage"]
     ]
     return Curve(run.name if run.is_dir() else run.parent.name, steps, values, boundaries)
+
+
+READ = ("stage", "stage_name", "env_steps", "success")
+"""The columns a plot needs, which every ``metrics.csv`` has had: without them the header is lost."""
+
+
+def _table(path: Path) -> tuple[list[str], list[tuple[int, dict[str, str]]]]:
+    """The header of the CSV file at ``path`` and its rows, each with its line. A run killed while writing,
+    or a hand edit, can damage the file; that is a ValueError at the line, never a KeyError from a plot."""
+    raw = path.read_bytes()
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as error:
+        line = raw.count(b"\n", 0, error.start) + 1
+        raise ValueError(f"{path}:{line}: not UTF-8 text ({error.reason}); the file is damaged") from None
+    reader = csv.reader(io.StringIO(text, newline=""))
+    try:
+        header = next(reader, [])
+        missing = [column for column in READ if column not in header]
+        if header and missing:
+            raise ValueError(
+                f"{path}:1: the header has no column{'s' if len(missing) > 1 else ''} {', '.join(missing)}; the "
+                f"first line of {METRICS} must name its columns, as 'lanro train' writes it"
+            )
+        rows = []
+        for fields in reader:
+            if not fields:
+                continue  # a blank line
+            if len(fields) != len(header):
+                raise ValueError(
+                    f"{path}:{reader.line_num}: {len(fields)} values where the header names {len(header)} columns; "
+                    "the line is damaged: delete or repair it"
+                )
+            rows.append((reader.line_num, dict(zip(header, fields))))
+    except csv.Error as error:
+        raise ValueError(f"{path}:{reader.line_num}: not a CSV line ({error}); the file is damaged") from None
+    return header, rows
+
+
+def _number(path: Path, line: int, row: dict[str, str], column: str, kind: type[float] | type[int]) -> float:
+    try:
+        return kind(row[column])
+    except ValueError:
+        what = "a whole number" if kind is int else "a number"
+        raise ValueError(f"{path}:{line}: {column} is {row[column]!r}, not {what}; the line is damaged") from None
 
 
 def mean_and_spread(curves: Sequence[Curve], column: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

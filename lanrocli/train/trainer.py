@@ -19,7 +19,10 @@ from typing import Any
 import numpy as np
 import torch
 
-from lanrocli.agent import BufferSettings, ObjectLayout, ReplayBuffer, SACAgent, SACSettings
+from lanrocli.agent.buffer import ReplayBuffer
+from lanrocli.agent.networks import ObjectLayout
+from lanrocli.agent.sac import SACAgent
+from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.choices import Task
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
 from lanrocli.envs.evaluation import EvaluationReport, evaluate

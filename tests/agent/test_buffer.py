@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lanrocli.agent import Batch, EpisodeData, ReplayBuffer
+from lanrocli.agent.buffer import Batch, EpisodeData, ReplayBuffer
 
 from .episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
 from .sentences import parse, referents

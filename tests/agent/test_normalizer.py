@@ -10,7 +10,10 @@ import numpy as np
 import pytest
 import torch
 
-from lanrocli.agent import ObjectLayout, RunningNormalizer, SACAgent, SACSettings
+from lanrocli.agent.networks import ObjectLayout
+from lanrocli.agent.normalizer import RunningNormalizer
+from lanrocli.agent.sac import SACAgent
+from lanrocli.agent.settings import SACSettings
 
 from .episodes import ACTION_DIM, OBS_DIM, VOCAB
 

@@ -11,7 +11,10 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from lanrocli.agent import Batch, BufferSettings, ObjectLayout, ReplayBuffer, SACAgent, SACSettings
+from lanrocli.agent.buffer import Batch, ReplayBuffer
+from lanrocli.agent.networks import ObjectLayout
+from lanrocli.agent.sac import SACAgent
+from lanrocli.agent.settings import BufferSettings, SACSettings
 
 from .episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
 

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 import torch
 
-from lanrocli.agent import BufferSettings, EpisodeData, ReplayBuffer, SACAgent, SACSettings
+from lanrocli.agent.buffer import EpisodeData, ReplayBuffer
+from lanrocli.agent.sac import SACAgent
+from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.language import COLOURS, SHAPES, ObjectProps, grammar_vocabulary
 from lanrocli.train.checkpoint import (
     AGENT_FILE,

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
-from lanrocli.agent import BufferSettings, SACSettings
+from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.choices import Kind, Mode, Task
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.language import TASKS
@@ -428,3 +430,22 @@ def test_buffer_and_loop_settings_under_agent_are_read_with_a_warning(tmp_path: 
         curriculum = load_curriculum(write(tmp_path, "c.yaml", text))
     assert curriculum.buffer.settings() == BufferSettings(size=5000, hindsight_share=0.3)
     assert curriculum.updates_per_step == 2 and curriculum.agent.settings() == SACSettings(critics=2)
+
+
+def test_reading_curricula_loads_neither_torch_nor_pybullet() -> None:
+    # A fresh interpreter: in this one, other tests have loaded both long ago.
+    code = "import lanrocli.train.curriculum, sys; print(sorted({'torch', 'pybullet'} & set(sys.modules)))"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "[]", f"importing lanrocli.train.curriculum loaded {result.stdout.strip()}"
+
+
+def test_lanro_check_does_not_load_torch() -> None:
+    """``lanro check`` answers at once: torch alone takes seconds to import on a busy machine."""
+    path = Path(__file__).parents[2] / "curricula" / "push.yaml"
+    command = [sys.executable, "-X", "importtime", "-c", "from lanrocli.cli import app; app(prog_name='lanro')"]
+    result = subprocess.run([*command, "check", str(path)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "environment steps in all" in result.stdout
+    imported = {line.rsplit("|", 1)[-1].strip() for line in result.stderr.splitlines() if line.startswith("import time:")}
+    assert "lanrocli.train.curriculum" in imported and not imported & {"torch", "pybullet"}

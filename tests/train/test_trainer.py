@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import torch
 
-from lanrocli.agent import BufferSettings, SACSettings
+from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.checkpoint import AGENT_FILE, load_agent_state
 from lanrocli.train.runfolder import LATEST, CheckpointError, read_pointer
@@ -111,7 +111,7 @@ def test_entering_a_stage_changes_the_environments_and_keeps_the_learning() -> N
 WRITER = """
 import sys
 from pathlib import Path
-from lanrocli.agent import BufferSettings, SACSettings
+from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.runfolder import LATEST, prune, write_pointer
 from lanrocli.train.trainer import Trainer, TrainSettings
