@@ -64,8 +64,8 @@ class EnvSettings:
             raise ValueError(f"max_episode_steps must be positive, got {self.max_episode_steps}")
         if not 0.0 <= self.random_start <= 1.0:
             raise ValueError(f"random_start must be a probability within [0, 1], got {self.random_start}")
-        object.__setattr__(self, "kinds", None if self.kinds is None else self.instructor.kinds)
-        self.instructor  # the instructor checks its own settings, across fields too
+        instructor = self.instructor  # the instructor checks its own settings, across fields too
+        object.__setattr__(self, "kinds", None if self.kinds is None else instructor.kinds)
 
     @property
     def instructor(self) -> InstructorSettings:
