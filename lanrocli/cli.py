@@ -447,16 +447,19 @@ def train_command(
     ] = False,
 ) -> None:
     """Train an agent through a curriculum of stages, with evaluation, checkpoints and resume."""
+    if curriculum is None and not quick and not resume:
+        raise fail("give a curriculum file (e.g. curricula/reach.yaml), or --quick for the built-in one")
+    plan = None if curriculum is None and resume and not quick else _load_plan(curriculum, quick, seed, envs)
+
+    # Only now: a bad curriculum is refused without waiting for torch and pybullet to load.
     import torch
 
     from lanrocli.display import StopRequest, TrainingDisplay
+    from lanrocli.train.checkpoint import CheckpointWriteError
     from lanrocli.train.curriculum import CurriculumError
     from lanrocli.train.pipeline import CurriculumRun, RunError
     from lanrocli.train.trainer import pick_device
 
-    if curriculum is None and not quick and not resume:
-        raise fail("give a curriculum file (e.g. curricula/reach.yaml), or --quick for the built-in one")
-    plan = None if curriculum is None and resume and not quick else _load_plan(curriculum, quick, seed, envs)
     if out is None:
         if plan is None:
             raise fail("--resume without a curriculum file needs --out: the run folder to continue")
@@ -475,6 +478,8 @@ def train_command(
             run = CurriculumRun.start(plan, out, torch_device, display)
     except (RunError, CurriculumError) as error:
         raise fail(str(error)) from None
+    for note in run.notes:
+        err_console.print(f"[bold yellow]note:[/] {escape(note)}")
     if run.state.finished:
         try:
             run.complete_tests()  # a run stopped while testing its last stage
@@ -487,6 +492,13 @@ def train_command(
         try:
             with display:
                 finished = run.run(should_stop=stop.requested)
+        except CheckpointWriteError as error:
+            raise fail(f"{error}\nresume with: {resume_hint}", code=1) from None
+        except OSError as error:
+            raise fail(
+                f"the run stopped: {error}. Its newest checkpoint is whole; fix the cause and resume with: {resume_hint}",
+                code=1,
+            ) from None
         finally:
             run.close()
     console = display.console

@@ -6,6 +6,11 @@ a temporary name, every file fsynced, then renamed into place; the pointers that
 that (see :mod:`lanrocli.train.runfolder`). Loading uses ``torch.load(weights_only=True)`` and
 ``np.load(allow_pickle=False)``, so a file from a stranger cannot run code.
 
+Each checkpoint ends with ``manifest.json``: the format version and the size and SHA-256 of every other file,
+so a truncated or altered file is found before it is read, and named. Checkpoints written before the manifest
+(format 1) load unchecked. A write that fails (a full disk, a folder made read-only) removes its temporary
+directory and says how much room the checkpoint needs; the checkpoints written before it stay whole.
+
 Files written by older versions load too: their ``state.json`` also holds ``agent_settings``, a second copy
 of the settings that ``agent.pt`` holds, which is ignored; and their agent's settings hold those of the
 replay buffer and the training loop, which are read into the training settings.
@@ -13,13 +18,18 @@ replay buffer and the training loop, which are read into the training settings.
 
 from __future__ import annotations
 
+import errno
+import hashlib
+import io
 import json
 import os
 import pickle
 import shutil
+import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import torch
@@ -32,6 +42,12 @@ AGENT_FILE = "agent.pt"
 BUFFER_FILE = "buffer.npz"
 STATE_FILE = "state.json"
 PARTIAL_FILE = "partial.npz"
+MANIFEST_FILE = "manifest.json"
+FORMAT = 2
+"""The checkpoint format this version writes: 2 added ``manifest.json``; 1 is read too."""
+RESUMABLE_FILES = (AGENT_FILE, BUFFER_FILE, STATE_FILE, PARTIAL_FILE)
+
+T = TypeVar("T")
 
 
 @dataclass
@@ -79,28 +95,96 @@ def state_from_json(state: dict[str, Any]) -> dict[str, Any]:
 # -- writing -----------------------------------------------------------------------------------------------
 
 
+class CheckpointWriteError(CheckpointError):
+    """A checkpoint could not be written; nothing of it was left behind."""
+
+
 def save_checkpoint(directory: Path, contents: Checkpoint) -> Path:
     """Write ``contents`` as a checkpoint at ``directory`` (which must not exist yet) and return it."""
     if directory.exists():
         raise CheckpointError(f"checkpoint {directory} exists already; checkpoints are never overwritten")
-    directory.parent.mkdir(parents=True, exist_ok=True)
     tmp = temporary(directory)
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    tmp.mkdir()
-    torch.save(contents.agent, tmp / AGENT_FILE)
+    try:
+        directory.parent.mkdir(parents=True, exist_ok=True)
+        if tmp.exists():
+            shutil.rmtree(tmp)
+        tmp.mkdir()
+        _write_files(tmp, contents)
+        fsync_dir(tmp)
+        os.replace(tmp, directory)
+        fsync_dir(directory.parent)
+    except OSError as error:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise CheckpointWriteError(_write_failure(directory, contents, error)) from None
+    return directory
+
+
+def _write_files(tmp: Path, contents: Checkpoint) -> None:
+    """Every file of the checkpoint into ``tmp``, fsynced, the manifest last."""
+    # The agent is serialised in memory first: torch reports a failed write to disk as an opaque
+    # RuntimeError, whereas a plain file write fails with the OSError that says what went wrong.
+    agent = io.BytesIO()
+    torch.save(contents.agent, agent)
+    (tmp / AGENT_FILE).write_bytes(agent.getvalue())
     (tmp / STATE_FILE).write_text(json.dumps(_plain_state(contents), indent=1))
     names = [AGENT_FILE, STATE_FILE]
     if contents.buffer is not None and contents.partials is not None:
         _write_buffer(tmp / BUFFER_FILE, contents.buffer)
         _write_partials(tmp / PARTIAL_FILE, contents.partials)
         names += [BUFFER_FILE, PARTIAL_FILE]
-    for name in names:
+    manifest = {"format": FORMAT, "files": {name: _fingerprint(tmp / name) for name in names}}
+    (tmp / MANIFEST_FILE).write_text(json.dumps(manifest, indent=1))
+    for name in [*names, MANIFEST_FILE]:
         fsync_file(tmp / name)
-    fsync_dir(tmp)
-    os.replace(tmp, directory)
-    fsync_dir(directory.parent)
-    return directory
+
+
+def _write_failure(directory: Path, contents: Checkpoint, error: OSError) -> str:
+    """Why a checkpoint write failed, and what it needs, in words a user can act on."""
+    needed = _size_bound(contents)
+    where = directory.parent if directory.parent.exists() else directory.parent.parent
+    try:
+        free = f"{shutil.disk_usage(where).free / 2**20:,.0f} MB are free there"
+    except OSError:
+        free = "the free space there is unknown"
+    reason = error.strerror or str(error)
+    if error.errno in (errno.ENOSPC, errno.EDQUOT):
+        advice = "free some space (or move the run folder to a larger disk)"
+    elif error.errno in (errno.EROFS, errno.EACCES, errno.EPERM):
+        advice = "make the run folder writable again"
+    else:
+        advice = "fix the cause"
+    return (
+        f"could not write checkpoint {directory}: {reason}. Checkpoints written before it are whole. "
+        f"It needs up to {needed / 2**20:,.1f} MB; {free}. Then {advice} and resume."
+    )
+
+
+def _size_bound(contents: Checkpoint) -> int:
+    """Bytes a checkpoint of ``contents`` takes at most (its arrays uncompressed)."""
+    agent = sum(t.numel() * t.element_size() for t in _tensors(contents.agent))
+    arrays = 0
+    if contents.buffer is not None and contents.partials is not None:
+        arrays = sum(a.nbytes for a in contents.buffer.state()[1].values())
+        arrays += sum(a.nbytes for partial in contents.partials for a in partial.values())
+    return agent + arrays + len(json.dumps(_plain_state(contents))) + 2**16
+
+
+def _tensors(value: Any) -> list[torch.Tensor]:
+    if isinstance(value, torch.Tensor):
+        return [value]
+    if isinstance(value, dict):
+        return [t for v in value.values() for t in _tensors(v)]
+    if isinstance(value, (list, tuple)):
+        return [t for v in value for t in _tensors(v)]
+    return []
+
+
+def _fingerprint(path: Path) -> dict[str, Any]:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return {"bytes": path.stat().st_size, "sha256": digest.hexdigest()}
 
 
 def _plain_state(contents: Checkpoint) -> dict[str, Any]:
@@ -135,28 +219,68 @@ def _write_partials(path: Path, partials: list[dict[str, np.ndarray]]) -> None:
 
 def load_checkpoint(directory: Path, device: str | torch.device = "cpu", resumable: bool = True) -> Checkpoint:
     """The checkpoint at ``directory``; with ``resumable`` all of it, and an error if it cannot be resumed
-    from, else its agent and state only (the buffer, which may be large, is not read)."""
+    from, else its agent and state only (the buffer, which may be large, is not read). A damaged file is
+    a ``CheckpointError`` that names it."""
     if resumable:
-        missing = [n for n in (AGENT_FILE, BUFFER_FILE, STATE_FILE, PARTIAL_FILE) if not (directory / n).is_file()]
+        missing = [n for n in RESUMABLE_FILES if not (directory / n).is_file()]
         if missing:
             raise CheckpointError(
                 f"{directory} cannot be resumed from: missing {', '.join(missing)} "
                 "(a 'best' checkpoint holds the agent only, for evaluation)"
             )
+    verify_checkpoint(directory, RESUMABLE_FILES if resumable else (AGENT_FILE, STATE_FILE))
     state = _load_state(directory)
     agent = load_agent_state(directory, device)
-    return Checkpoint(
-        agent=agent,
-        train_settings=_train_settings(state["train_settings"], agent["settings"]),
-        vocabulary=state["vocabulary"],
-        progress=state["progress"],
-        rng=state_from_json(state["rng"]),
-        wall_time=float(state["wall_time"]),
-        extra=state["extra"],
-        buffer=_read_buffer(directory / BUFFER_FILE) if resumable else None,
-        partials=_read_partials(directory / PARTIAL_FILE) if resumable else None,
-        environments=state["environments"] if resumable else None,
-    )
+    try:
+        return Checkpoint(
+            agent=agent,
+            train_settings=_train_settings(state["train_settings"], agent["settings"]),
+            vocabulary=state["vocabulary"],
+            progress=state["progress"],
+            rng=state_from_json(state["rng"]),
+            wall_time=float(state["wall_time"]),
+            extra=state["extra"],
+            buffer=_reading(directory / BUFFER_FILE, _read_buffer) if resumable else None,
+            partials=_reading(directory / PARTIAL_FILE, _read_partials) if resumable else None,
+            environments=state["environments"] if resumable else None,
+        )
+    except (KeyError, TypeError, ValueError) as error:
+        raise CheckpointError(f"{directory / STATE_FILE} is damaged: {error!r} is missing or wrong") from None
+
+
+def verify_checkpoint(directory: Path, names: tuple[str, ...] = RESUMABLE_FILES) -> None:
+    """Check ``names`` against the checkpoint's manifest (size, then SHA-256); a checkpoint written before
+    manifests existed passes unchecked. Raises a ``CheckpointError`` naming the first damaged file."""
+    path = directory / MANIFEST_FILE
+    if not path.is_file():
+        return  # format 1: its files are checked as they are read
+    try:
+        manifest = json.loads(path.read_text())
+        version, files = int(manifest["format"]), manifest["files"]
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError):
+        raise CheckpointError(f"{path} is damaged: it is not the manifest lanro writes") from None
+    if version > FORMAT:
+        raise CheckpointError(f"{directory} has checkpoint format {version}; this lanro reads up to {FORMAT}: upgrade it")
+    for name in names:
+        expected = files.get(name)
+        if expected is None:
+            raise CheckpointError(f"{directory} cannot be used: its manifest lists no {name}")
+        file = directory / name
+        if not file.is_file():
+            raise CheckpointError(f"{file} is missing")
+        size = file.stat().st_size
+        if size != expected["bytes"]:
+            raise CheckpointError(f"{file} is damaged: {size:,} bytes where {expected['bytes']:,} were written")
+        if _fingerprint(file)["sha256"] != expected["sha256"]:
+            raise CheckpointError(f"{file} is damaged: its contents differ from what was written (SHA-256)")
+
+
+def _reading(path: Path, read: Callable[[Path], T]) -> T:
+    """``read(path)``, with whatever a damaged archive raises as a ``CheckpointError`` naming the file."""
+    try:
+        return read(path)
+    except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile) as error:
+        raise CheckpointError(f"{path} is damaged: {error}") from None
 
 
 def _train_settings(saved: dict[str, Any], agent_settings: dict[str, Any]) -> dict[str, Any]:
@@ -182,13 +306,21 @@ def load_agent_state(directory: Path, device: str | torch.device = "cpu") -> dic
             f"{path} holds Python objects other than tensors and plain data, so it was not loaded "
             f"(loading it could run code). Only checkpoints written by lanro are accepted. Detail: {error}"
         ) from None
+    except (RuntimeError, EOFError, OSError, ValueError) as error:
+        raise CheckpointError(f"{path} is damaged: {error}") from None
 
 
 def _load_state(directory: Path) -> dict[str, Any]:
     path = directory / STATE_FILE
     if not path.is_file():
         raise CheckpointError(f"{directory} is not a checkpoint: {STATE_FILE} is missing")
-    return json.loads(path.read_text())
+    try:
+        state = json.loads(path.read_text())
+    except (ValueError, UnicodeDecodeError) as error:
+        raise CheckpointError(f"{path} is damaged: {error}") from None
+    if not isinstance(state, dict):
+        raise CheckpointError(f"{path} is damaged: it holds no object")
+    return state
 
 
 def _read_buffer(path: Path) -> ReplayBuffer:

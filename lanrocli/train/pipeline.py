@@ -10,22 +10,29 @@ the run selects on; ``report.md`` quotes those figures. A checkpoint follows eve
 interruption, so a resumed run repeats nothing and skips nothing: it ends with the same stages, step
 counts and, on CPU, the same numbers as a run that was never stopped.
 
+Every state a kill, a full disk or a damaged file can leave continues with one of two commands: a folder
+holding no checkpoint yet is started over by either a fresh start or ``--resume``; a damaged newest
+checkpoint makes ``--resume`` fall back to the newest whole one, setting the newer ones aside. Each
+checkpoint carries copies of ``config.yaml`` and ``metrics.csv`` as they were when it was written, so a
+resumed run rewrites both from it, whatever happened to them since.
+
 What the run writes, and where, is :mod:`lanrocli.train.runfolder`'s business.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import torch
 
 from lanrocli.choices import Instruction
 from lanrocli.envs.evaluation import EvaluationReport, Rate, wilson_interval
-from lanrocli.train.curriculum import Curriculum, Promote, Stage, diff_curricula, load_curriculum
+from lanrocli.train.curriculum import Curriculum, CurriculumError, Promote, Stage, diff_curricula, load_curriculum
 from lanrocli.train.runfolder import (
     AGENT_METRICS,
     BEST,
@@ -34,26 +41,35 @@ from lanrocli.train.runfolder import (
     LAST,
     LATEST,
     METRICS,
+    LOCK,
+    SET_ASIDE,
     TEST,
     CheckpointError,
+    RunError,
+    RunLock,
     TensorBoard,
     append_metrics,
     best_checkpoint,
+    checkpoint_steps,
+    clear_leftovers,
+    is_leftover,
     publish,
     read_pointer,
+    repoint,
+    resumable_candidates,
+    set_aside,
     stage_folder,
     step_checkpoint,
     truncate_metrics,
     write_json,
     write_report,
+    write_text,
 )
 from lanrocli.train.seeds import evaluation_seed
 from lanrocli.train.testset import measure
 from lanrocli.train.trainer import Trainer, TrainSettings
 
-
-class RunError(RuntimeError):
-    """A run cannot start or resume as asked (the folder is in use, the curriculum changed, ...)."""
+Loaded = TypeVar("Loaded")
 
 
 @dataclass
@@ -136,13 +152,23 @@ class CurriculumRun:
     """Runs a curriculum in its run folder; :meth:`start` a new run or :meth:`resume` one."""
 
     def __init__(
-        self, curriculum: Curriculum, out: Path, trainer: Trainer, state: RunState, observer: RunObserver | None
+        self,
+        curriculum: Curriculum,
+        out: Path,
+        trainer: Trainer,
+        state: RunState,
+        observer: RunObserver | None,
+        lock: RunLock,
+        notes: list[str] | None = None,
     ) -> None:
         self.curriculum = curriculum
         self.out = out
         self.trainer = trainer
         self.state = state
         self.observer = observer or RunObserver()
+        self.notes = notes or []
+        """What starting or resuming did that the user should know (a start over, a fallback)."""
+        self._lock = lock
         self._tensorboard = TensorBoard.open(out, purge_step=trainer.progress.env_steps)
         if not state.finished and trainer.settings.stage != state.stage:
             # The checkpoint was written as its stage ended: the next stage starts from here.
@@ -154,28 +180,34 @@ class CurriculumRun:
     def start(
         cls, curriculum: Curriculum, out: Path, device: str | torch.device = "cpu", observer: RunObserver | None = None
     ) -> CurriculumRun:
-        """A new run in ``out``, which must not exist or be empty: a finished run is never overwritten."""
-        if out.exists() and (not out.is_dir() or any(out.iterdir())):
-            raise RunError(
-                f"{out} is not empty. Continue the run there with --resume, or choose another folder with --out."
-            )
-        out.mkdir(parents=True, exist_ok=True)
-        (out / CONFIG).write_text(curriculum.to_yaml())
-        first = curriculum.stages[0]
-        settings = TrainSettings(
-            task=curriculum.task,
-            env=first.env.settings(),
-            seed=curriculum.seed,
-            envs=curriculum.envs,
-            eval_episodes=curriculum.eval.episodes,
-            learning_starts=curriculum.learning_starts,
-            updates_per_step=curriculum.updates_per_step,
-            buffer=curriculum.buffer.settings(),
-            object_slots=curriculum.max_objects,
-            stage=0,
-        )
-        trainer = Trainer(settings, curriculum.agent.settings(), device)
-        return cls(curriculum, out, trainer, RunState(), observer)
+        """A new run in ``out``, which must not exist, be empty, or hold only what a run killed before its
+        first checkpoint left (which is removed): a run with a checkpoint is never overwritten."""
+        if out.exists() and not out.is_dir():
+            raise RunError(f"{out} is a file, not a run folder; choose another folder with --out")
+        lock = RunLock(out)
+        with _released_on_error(lock):
+            entries = [entry for entry in out.iterdir() if entry.name != LOCK]
+            if not all(is_leftover(entry) for entry in entries):
+                raise RunError(
+                    f"{out} is not empty. Continue the run there with --resume, or choose another folder with --out."
+                )
+            notes = [f"{out} held a run stopped before its first checkpoint: starting it over"] if entries else []
+            return cls._begin(curriculum, out, device, observer, lock, notes)
+
+    @classmethod
+    def _begin(
+        cls,
+        curriculum: Curriculum,
+        out: Path,
+        device: str | torch.device,
+        observer: RunObserver | None,
+        lock: RunLock,
+        notes: list[str],
+    ) -> CurriculumRun:
+        clear_leftovers(out)
+        write_text(out / CONFIG, curriculum.to_yaml())
+        trainer = Trainer(_train_settings(curriculum), curriculum.agent.settings(), device)
+        return cls(curriculum, out, trainer, RunState(), observer, lock, notes)
 
     @classmethod
     def resume(
@@ -185,27 +217,33 @@ class CurriculumRun:
         device: str | torch.device = "cpu",
         observer: RunObserver | None = None,
     ) -> CurriculumRun:
-        """The run in ``out`` from its latest checkpoint. ``curriculum``, when given, must equal the one the
-        run was started with; a run continues with the plan it began with or not at all."""
-        config = out / CONFIG
-        if not config.is_file():
-            raise RunError(f"{out} holds no run to resume ({CONFIG} is missing); start one without --resume")
-        saved = load_curriculum(config)
-        if curriculum is not None:
-            changes = diff_curricula(saved, curriculum, f"{config} (the run's)", "the curriculum given now")
-            if changes:
-                raise RunError(
-                    "the curriculum differs from the one this run was started with, so it was not resumed. "
-                    "Resume with the same file and options, or start a new run with another --out.\n" + changes
-                )
-        try:
-            directory = read_pointer(out / LATEST)
-        except CheckpointError:
-            raise RunError(f"{out} has no checkpoint yet (the run stopped before its first one); start it again") from None
-        trainer, extra = Trainer.load(directory, device)
-        state = RunState.from_dict(extra["run"])
-        truncate_metrics(out / METRICS, trainer.progress.env_steps)
-        return cls(saved, out, trainer, state, observer)
+        """The run in ``out`` from its newest whole checkpoint. ``curriculum``, when given, must equal the one
+        the run was started with; a run continues with the plan it began with or not at all. A run that
+        wrote no checkpoint is started over."""
+        if not out.is_dir():
+            raise RunError(f"{out} holds no run to resume; start one without --resume")
+        lock = RunLock(out)
+        with _released_on_error(lock):
+            candidates = resumable_candidates(out)
+            if not candidates and not (out / LATEST).exists():
+                plan = curriculum or _saved_plan(out)
+                notes = [f"{out} has no checkpoint yet (the run stopped before its first one): starting it over"]
+                return cls._begin(plan, out, device, observer, lock, notes)
+            directory, (trainer, extra), notes = _newest_whole(out, candidates, lambda d: Trainer.load(d, device))
+            try:
+                saved = _restore_files(out, directory, extra, notes)
+                if curriculum is not None:
+                    changes = diff_curricula(saved, curriculum, f"{out / CONFIG} (the run's)", "the curriculum given now")
+                    if changes:
+                        raise RunError(
+                            "the curriculum differs from the one this run was started with, so it was not resumed. "
+                            "Resume with the same file and options, or start a new run with another --out.\n"
+                            + changes
+                        )
+            except BaseException:
+                trainer.close()
+                raise
+            return cls(saved, out, trainer, RunState.from_dict(extra["run"]), observer, lock, notes)
 
     # -- running -----------------------------------------------------------------------------------------
 
@@ -332,7 +370,9 @@ class CurriculumRun:
         evaluation just made was the stage's best, the agent alone as ``best``."""
         folder = self.out / stage_folder(stage_index, self.curriculum.stages[stage_index])
         steps = self.trainer.progress.env_steps
-        extra = {"run": self.state.to_dict()}
+        metrics = self.out / METRICS
+        files = {CONFIG: (self.out / CONFIG).read_text(), METRICS: metrics.read_text() if metrics.is_file() else ""}
+        extra = {"run": self.state.to_dict(), "files": files}
         last = folder / step_checkpoint(steps)
         if not last.exists():  # an interruption right after an evaluation finds its checkpoint written
             self.trainer.save(last, extra)
@@ -342,3 +382,101 @@ class CurriculumRun:
     def close(self) -> None:
         self.trainer.close()
         self._tensorboard.close()
+        self._lock.release()
+
+
+def _train_settings(curriculum: Curriculum) -> TrainSettings:
+    """The trainer's settings at the start of the curriculum's first stage."""
+    return TrainSettings(
+        task=curriculum.task,
+        env=curriculum.stages[0].env.settings(),
+        seed=curriculum.seed,
+        envs=curriculum.envs,
+        eval_episodes=curriculum.eval.episodes,
+        learning_starts=curriculum.learning_starts,
+        updates_per_step=curriculum.updates_per_step,
+        buffer=curriculum.buffer.settings(),
+        object_slots=curriculum.max_objects,
+        stage=0,
+    )
+
+
+def _saved_plan(out: Path) -> Curriculum:
+    """The curriculum a run without a checkpoint was started with, to start it over."""
+    try:
+        return load_curriculum(out / CONFIG)
+    except (CurriculumError, OSError):
+        raise RunError(
+            f"{out} holds no checkpoint and no readable {CONFIG}: start it again with the curriculum file, "
+            f"'lanro train CURRICULUM --out {out}' (what is there is replaced, as nothing was trained yet)"
+        ) from None
+
+
+def _newest_whole(out: Path, candidates: list[Path], load: Callable[[Path], Loaded]) -> tuple[Path, Loaded, list[str]]:
+    """The checkpoint to resume from, loaded: the one ``latest`` names when it is whole, else the newest
+    whole one, whose checkpoints written later are then set aside. Raises ``RunError`` when none is whole."""
+    problems: list[str] = []
+    try:
+        named = read_pointer(out / LATEST)
+        if named.is_dir():
+            candidates = [named, *(c for c in candidates if c != named)]
+        else:
+            problems.append(f"{out / LATEST} names {named.relative_to(out)}, which does not exist")
+    except CheckpointError as error:
+        problems.append(str(error))
+    newest = max((checkpoint_steps(c) or 0 for c in candidates), default=0)
+    for directory in candidates:
+        try:
+            loaded = load(directory)
+        except CheckpointError as error:
+            problems.append(str(error))
+            continue
+        notes = [f"damaged: {problem}" for problem in problems]
+        steps = checkpoint_steps(directory) or 0
+        if problems:
+            notes.append(
+                f"resuming from the newest whole checkpoint, {directory.parent.name}/{directory.name}: "
+                f"{newest - steps:,} environment steps will be trained again"
+            )
+        moved = set_aside(out, steps)
+        if moved:
+            notes.append(f"{len(moved)} checkpoint(s) written after it were moved to {out / SET_ASIDE}; delete them when done")
+        if problems or moved:
+            repoint(out, directory)
+        return directory, loaded, notes
+    listed = "\n".join(f"  {problem}" for problem in problems)
+    raise RunError(
+        f"{out} holds no whole checkpoint to resume from:\n{listed}\n"
+        f"Start a new run with another --out, or delete {out} and start again."
+    )
+
+
+@contextmanager
+def _released_on_error(lock: RunLock) -> Iterator[None]:
+    """Hold ``lock`` beyond the block only if it succeeds: a run that fails to open lets the folder go."""
+    try:
+        yield
+    except BaseException:
+        lock.release()
+        raise
+
+
+def _restore_files(out: Path, directory: Path, extra: dict[str, Any], notes: list[str]) -> Curriculum:
+    """Rewrite ``config.yaml`` and ``metrics.csv`` as the checkpoint at ``directory`` saw them (older
+    checkpoints hold no copies: their metrics are cut back to the checkpoint's steps), and return the run's
+    curriculum."""
+    copies = extra.get("files", {})
+    if CONFIG in copies:
+        config = out / CONFIG
+        current = config.read_text() if config.is_file() else None
+        if current != copies[CONFIG]:
+            notes.append(f"{config} was {'changed' if current is not None else 'missing'}: restored from the checkpoint")
+            write_text(config, copies[CONFIG])
+    if METRICS in copies:
+        write_text(out / METRICS, copies[METRICS])
+    else:
+        truncate_metrics(out / METRICS, checkpoint_steps(directory) or 0)
+    try:
+        return load_curriculum(out / CONFIG)
+    except (CurriculumError, OSError) as error:
+        raise RunError(f"{out} holds no readable {CONFIG} and its checkpoint no copy of it: {error}") from None

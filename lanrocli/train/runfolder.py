@@ -6,16 +6,22 @@ The run folder holds everything a researcher looks at or resumes from::
     metrics.csv                  one row per evaluation
     report.md                    the per-stage table, rewritten whenever a stage ends
     latest                       pointer to the newest checkpoint
-    stage-K-NAME/step-N/         the stage's newest resumable checkpoint (agent, buffer, environments)
+    stage-K-NAME/step-N/         the stage's two newest resumable checkpoints (agent, buffer, environments)
     stage-K-NAME/best-N/         the agent of the stage's best evaluation (agent and state only)
-    stage-K-NAME/last, best      pointers to those two
-    events.*                     TensorBoard scalars, when the tensorboard package is installed
-
+    stage-K-NAME/last, best      pointers to the newest step-N and to best-N
     stage-K-NAME/test.json       the stage's last and best agents on its held-out test episodes
+    events.*                     TensorBoard scalars, when the tensorboard package is installed
+    .lock                        locked by the process that writes the run (names it)
+    set-aside/                   checkpoints newer than the one a run resumed from after damage
 
 Whatever may be read while a run is killed is replaced whole: it is written under a temporary name
 (``TMP_PREFIX``), then renamed into place. A pointer changes only after the checkpoint it names is complete
-on disk, so a kill at any moment leaves the previous checkpoint and the pointer to it whole.
+on disk, so a kill at any moment leaves the previous checkpoint and the pointer to it whole. The stage keeps
+the checkpoint before its newest, so a damaged newest one costs one evaluation's steps, not the stage.
+
+One process writes a run folder at a time: it holds an OS lock on ``.lock``, which the kernel releases when
+the process ends however it ends, so a killed run never leaves a stale lock. Readers (``lanro eval``,
+``lanro plot``) do not take it.
 
 This module loads neither torch nor pybullet (TensorBoard's writer aside, imported when a run opens it),
 so plotting and reading a run folder stay quick.
@@ -24,10 +30,13 @@ so plotting and reading a run folder stay quick.
 from __future__ import annotations
 
 import csv
+import fcntl
 import json
 import math
 import os
+import re
 import shutil
+import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -48,6 +57,11 @@ LATEST = "latest"
 LANGUAGE = "language"
 """Key of ``test.json`` under which the last stage's final agent is measured with each ``Instruction``."""
 TMP_PREFIX = ".tmp-"
+LOCK = ".lock"
+SET_ASIDE = "set-aside"
+_STAGE_FOLDER = re.compile(r"stage-\d+-.+")
+_STEP_CHECKPOINT = re.compile(r"step-(\d+)")
+_BEST_CHECKPOINT = re.compile(r"best-(\d+)")
 
 AGENT_METRICS = (
     "critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy"
@@ -59,7 +73,11 @@ METRIC_COLUMNS = (
 
 
 class CheckpointError(RuntimeError):
-    """A checkpoint is missing, incomplete, or not plain data."""
+    """A checkpoint is missing, incomplete, damaged, or not plain data."""
+
+
+class RunError(RuntimeError):
+    """A run cannot start or resume as asked (the folder is in use, the curriculum changed, ...)."""
 
 
 # -- names -------------------------------------------------------------------------------------------------
@@ -112,14 +130,24 @@ def write_pointer(pointer: Path, target: str) -> None:
 def read_pointer(pointer: Path) -> Path:
     if not pointer.is_file():
         raise CheckpointError(f"no checkpoint pointer at {pointer}")
-    return pointer.parent / pointer.read_text().strip()
+    try:
+        target = pointer.read_text(encoding="utf-8").strip()
+    except (OSError, UnicodeDecodeError) as error:
+        raise CheckpointError(f"the pointer {pointer} is damaged: {error}") from None
+    if not target or "\n" in target or "\0" in target:
+        raise CheckpointError(f"the pointer {pointer} is damaged: it names no checkpoint")
+    return pointer.parent / target
+
+
+def write_text(path: Path, text: str) -> None:
+    """Write ``path`` whole or not at all: a kill mid-write leaves the old file or none."""
+    tmp = temporary(path)
+    tmp.write_text(text)
+    os.replace(tmp, path)
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:
-    """Write ``path`` whole or not at all: a kill mid-write leaves the old file or none."""
-    tmp = temporary(path)
-    tmp.write_text(json.dumps(data, indent=1))
-    os.replace(tmp, path)
+    write_text(path, json.dumps(data, indent=1))
 
 
 def prune(directory: Path, keep: set[Path]) -> None:
@@ -132,14 +160,146 @@ def prune(directory: Path, keep: set[Path]) -> None:
 
 def publish(out: Path, last: Path, best: Path | None) -> None:
     """Point the stage folder's ``last`` (and ``best``, when given) and the run's ``latest`` at checkpoints
-    just written, then remove the stage's checkpoints that no pointer names. Pointers change only once their
-    checkpoints are whole and pruning comes after them, so a kill at any moment leaves one to resume from."""
+    just written, then remove the stage's checkpoints that no pointer names, but for the one ``last`` named
+    before. Pointers change only once their checkpoints are whole and pruning comes after them, so a kill
+    at any moment leaves one to resume from."""
     folder = last.parent
+    previous = _pointed(folder, LAST)
     if best is not None:
         write_pointer(folder / BEST, best.name)
     write_pointer(folder / LAST, last.name)
     write_pointer(out / LATEST, f"{folder.name}/{last.name}")
-    prune(folder, {read_pointer(folder / name) for name in (LAST, BEST) if (folder / name).is_file()})
+    prune(folder, {last, *previous, *_pointed(folder, BEST)})
+
+
+def _pointed(folder: Path, *names: str) -> list[Path]:
+    """What the pointers ``names`` of ``folder`` name now (a damaged pointer names nothing)."""
+    targets = []
+    for name in names:
+        try:
+            targets.append(read_pointer(folder / name))
+        except CheckpointError:
+            pass
+    return targets
+
+
+# -- what a run folder holds -------------------------------------------------------------------------------
+
+
+def checkpoint_steps(directory: Path) -> int | None:
+    """The environment steps in a checkpoint's name, or None for a name that is not one."""
+    match = _STEP_CHECKPOINT.fullmatch(directory.name) or _BEST_CHECKPOINT.fullmatch(directory.name)
+    return int(match.group(1)) if match else None
+
+
+def resumable_candidates(out: Path) -> list[Path]:
+    """The run's resumable checkpoint directories (whole or not), newest first."""
+    found = [
+        directory
+        for folder in out.iterdir()
+        if folder.is_dir() and _STAGE_FOLDER.fullmatch(folder.name)
+        for directory in folder.iterdir()
+        if directory.is_dir() and _STEP_CHECKPOINT.fullmatch(directory.name)
+    ]
+    return sorted(found, key=lambda d: (checkpoint_steps(d), d.parent.name), reverse=True)
+
+
+def is_leftover(entry: Path) -> bool:
+    """Whether ``entry`` of a run folder is something a run writes before its first checkpoint, so that a
+    folder holding nothing else can be started over without losing anything."""
+    name = entry.name
+    if name in (CONFIG, METRICS, REPORT, LOCK) or name.startswith(TMP_PREFIX) or name.startswith("events."):
+        return True
+    if entry.is_dir() and _STAGE_FOLDER.fullmatch(name):
+        return all(child.name.startswith(TMP_PREFIX) for child in entry.iterdir())
+    return False
+
+
+def clear_leftovers(out: Path) -> None:
+    """Remove what a run killed before its first checkpoint left in ``out`` (the lock file stays)."""
+    for entry in out.iterdir():
+        if entry.name != LOCK:
+            shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+
+
+def set_aside(out: Path, newer_than: int) -> list[Path]:
+    """Move every checkpoint written after step ``newer_than`` into ``out/set-aside``, so a run resumed from
+    an older checkpoint writes its own again; returns where they went. Nothing is deleted: a damaged
+    checkpoint may be worth a look."""
+    moved = []
+    for folder in sorted(out.iterdir()):
+        if not (folder.is_dir() and _STAGE_FOLDER.fullmatch(folder.name)):
+            continue
+        for directory in sorted(folder.iterdir()):
+            steps = checkpoint_steps(directory)
+            if directory.is_dir() and steps is not None and steps > newer_than:
+                target = out / SET_ASIDE / folder.name / directory.name
+                n = 1
+                while target.exists():
+                    target = target.with_name(f"{directory.name}.{n}")
+                    n += 1
+                target.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(directory, target)
+                moved.append(target)
+    return moved
+
+
+def repoint(out: Path, checkpoint: Path) -> None:
+    """Point the run at ``checkpoint`` again after newer ones were set aside: ``latest`` and its stage's
+    ``last`` name it, ``best`` the newest agent-only checkpoint not newer than it (or nothing)."""
+    folder = checkpoint.parent
+    bests = sorted(
+        (d for d in folder.iterdir() if d.is_dir() and _BEST_CHECKPOINT.fullmatch(d.name)), key=checkpoint_steps
+    )
+    if bests:
+        write_pointer(folder / BEST, bests[-1].name)
+    elif (folder / BEST).exists():
+        (folder / BEST).unlink()
+    write_pointer(folder / LAST, checkpoint.name)
+    write_pointer(out / LATEST, f"{folder.name}/{checkpoint.name}")
+    for later in out.iterdir():
+        if later.is_dir() and _STAGE_FOLDER.fullmatch(later.name) and later != folder and not any(later.iterdir()):
+            later.rmdir()
+
+
+# -- one writer --------------------------------------------------------------------------------------------
+
+
+class RunLock:
+    """The OS lock on a run folder's ``.lock`` that makes its holder the folder's only writer."""
+
+    def __init__(self, out: Path) -> None:
+        """Take the lock on ``out`` (made if missing), or raise a ``RunError`` naming the process that holds
+        it; a folder this process cannot write in is refused here, before anything else is done."""
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            with tempfile.TemporaryFile(dir=out):
+                pass
+            self._file = open(out / LOCK, "a+")
+        except OSError as error:
+            raise RunError(
+                f"cannot write in the run folder {out}: {error.strerror or error}. Make it writable, or copy the "
+                "run to a folder you can write in and resume it there."
+            ) from None
+        try:
+            fcntl.flock(self._file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self._file.seek(0)
+            holder = self._file.read().strip() or "another process"
+            self._file.close()
+            raise RunError(
+                f"{out} is in use: {holder} is writing this run. Wait for it to end, or stop it "
+                "(Ctrl-C, or kill -INT with its pid) and resume."
+            ) from None
+        self._file.truncate(0)
+        self._file.write(f"process {os.getpid()}")
+        self._file.flush()
+
+    def release(self) -> None:
+        """Let another writer in; the kernel does the same when the process ends."""
+        if not self._file.closed:
+            fcntl.flock(self._file, fcntl.LOCK_UN)
+            self._file.close()
 
 
 # -- metrics.csv -------------------------------------------------------------------------------------------

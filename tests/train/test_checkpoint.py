@@ -15,6 +15,7 @@ from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.language import COLOURS, SHAPES, ObjectProps, grammar_vocabulary
 from lanrocli.train.checkpoint import (
     AGENT_FILE,
+    MANIFEST_FILE,
     STATE_FILE,
     Checkpoint,
     load_checkpoint,
@@ -103,7 +104,7 @@ def test_the_agent_settings_are_saved_once(tmp_path: Path) -> None:
 
 def test_an_evaluation_checkpoint_holds_the_agent_and_state_only(tmp_path: Path) -> None:
     light = save_checkpoint(tmp_path / "best-1", contents(resumable=False))
-    assert {p.name for p in light.iterdir()} == {AGENT_FILE, STATE_FILE}
+    assert {p.name for p in light.iterdir()} == {AGENT_FILE, STATE_FILE, MANIFEST_FILE}
     assert load_checkpoint(light, resumable=False).buffer is None
     with pytest.raises(CheckpointError, match="cannot be resumed from"):
         load_checkpoint(light)
@@ -137,6 +138,7 @@ def test_checkpoints_that_hold_a_second_copy_of_the_agent_settings_still_load(tm
     trainer.run(3)
     directory = trainer.save(tmp_path / "step-3")
     trainer.close()
+    (directory / MANIFEST_FILE).unlink()  # older versions wrote none
     path = directory / STATE_FILE
     state = json.loads(path.read_text())
     older = {"train_settings": state.pop("train_settings"), "agent_settings": agent.to_dict(), **state}
@@ -162,6 +164,7 @@ def test_checkpoints_whose_agent_held_the_buffer_and_loop_settings_still_load(tm
     trainer.run(3)
     directory = trainer.save(tmp_path / "step-3")
     trainer.close()
+    (directory / MANIFEST_FILE).unlink()  # older versions wrote none
     agent_state = torch.load(directory / AGENT_FILE, weights_only=True)
     old = {"buffer_size": 700, "updates_per_step": 2, "relabel_ratio": 0.6, "relabel_corrections": False,
            "correction_share": 0.5, "hindsight_share": 0.25}

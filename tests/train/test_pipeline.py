@@ -2,54 +2,22 @@
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 import signal
-import subprocess
-import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import NamedTuple
 
 import pytest
 
 from lanrocli.envs.evaluation import EpisodeResult, EvaluationReport, wilson_interval
 from lanrocli.train.checkpoint import resolve_checkpoint
 from lanrocli.train.curriculum import Curriculum, load_curriculum
-from lanrocli.train.pipeline import CurriculumRun, RunError, RunState
-from lanrocli.train.runfolder import CONFIG, LATEST, METRICS, REPORT, read_pointer
+from lanrocli.train.pipeline import CurriculumRun, RunError
+from lanrocli.train.runfolder import CONFIG, REPORT, read_pointer, step_checkpoint
 from lanrocli.train.seeds import evaluation_seed, held_out_seed
 
-TINY = """\
-name: tiny
-task: reach
-seed: 5
-envs: {envs}
-learning_starts: 40
-agent: {{batch_size: 16}}
-buffer: {{size: 4000}}
-eval: {{every: 40, episodes: 2}}
-test: {{episodes: 2}}
-stages:
-  - name: first
-    env: {{objects: 2, max_episode_steps: 15}}
-    budget: {{steps: 80}}
-    promote: {{success: 1.0}}
-  - name: second
-    env: {{objects: 2, correction_rate: 0.5, max_episode_steps: 20}}
-    budget: {{steps: 80}}
-  - name: third
-    env: {{objects: 3, mode: colour_shape, correction_rate: 0.5, negations: true, max_episode_steps: 20}}
-    budget: {{steps: 80}}
-"""
-
-
-def tiny(tmp_path: Path, envs: int = 1) -> Path:
-    path = tmp_path / "tiny.yaml"
-    path.write_text(TINY.format(envs=envs))
-    return path
+from .runs import Baseline, outcome, rows, tiny, train, wait_for_rows
 
 
 def report(successes: list[bool], corrected: list[bool] | None = None) -> EvaluationReport:
@@ -73,11 +41,6 @@ def scripted(run: CurriculumRun, reports: Iterator[EvaluationReport], seeds: lis
         return next(reports)
 
     run.trainer.evaluate = evaluate  # type: ignore[method-assign]
-
-
-def rows(out: Path) -> list[dict[str, str]]:
-    with open(out / METRICS, newline="") as f:
-        return list(csv.DictReader(f))
 
 
 @pytest.mark.slow
@@ -167,7 +130,10 @@ def test_the_run_folder_has_every_file(straight: Baseline) -> None:
         folder = out / f"stage-{index}-{name}"
         last, best = read_pointer(folder / "last"), read_pointer(folder / "best")
         assert (last / "buffer.npz").is_file() and (best / "agent.pt").is_file()
-        assert {p.name for p in folder.iterdir() if p.is_dir()} == {last.name, best.name}
+        # The stage keeps the resumable checkpoint before its last, to fall back on if the last is damaged.
+        start = 80 * (index - 1)
+        assert last.name == step_checkpoint(start + 80)
+        assert {p.name for p in folder.iterdir() if p.is_dir()} == {last.name, best.name, step_checkpoint(start + 40)}
     assert resolve_checkpoint(out) == read_pointer(out / "stage-3-third" / "last")
     table = (out / REPORT).read_text()
     assert "| 1. first | overall >= 1, 1 pooled | 80 of 80 | budget |" in table and "Status: finished" in table
@@ -199,50 +165,6 @@ def test_resume_with_a_changed_curriculum_is_refused_with_the_difference(tmp_pat
     with pytest.raises(RunError, match="differs") as error:
         CurriculumRun.resume(out, load_curriculum(path))
     assert "-    steps: 80" in str(error.value) and "+    steps: 90" in str(error.value)
-
-
-def train(args: list[str], cwd: Path) -> subprocess.Popen[str]:
-    # A new session, so a signal can go to the whole process group as a terminal's Ctrl-C does.
-    return subprocess.Popen(
-        [sys.executable, "-c", "from lanrocli.cli import app; app()", "train", *args],
-        cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
-    )
-
-
-class Baseline(NamedTuple):
-    curriculum: Path
-    out: Path
-
-
-@pytest.fixture(scope="module")
-def straight(tmp_path_factory: pytest.TempPathFactory) -> Baseline:
-    """The tiny curriculum on two environments, trained by ``lanro train`` without interruption: what every
-    interrupted run must end up equal to, and the run folder whose files are checked. Trained once for all
-    of them, as it is the slowest thing here; the tests only read it."""
-    folder = tmp_path_factory.mktemp("straight")
-    path = tiny(folder, envs=2)
-    process = train([str(path), "--out", "straight"], folder)
-    assert process.wait(timeout=300) == 0, process.stdout.read() if process.stdout else ""
-    return Baseline(path, folder / "straight")
-
-
-def wait_for_rows(out: Path, n: int, process: subprocess.Popen[str]) -> None:
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and process.poll() is None:
-        if (out / METRICS).is_file() and len(rows(out)) >= n:
-            return
-        time.sleep(0.02)
-    raise AssertionError(f"the run ended or stalled before {n} evaluations")
-
-
-def outcome(out: Path) -> tuple[list[dict[str, str]], list[tuple[str, int, int, str]], list[dict]]:
-    """Everything a run produced that must not depend on interruptions (wall time aside)."""
-    metrics = [{k: v for k, v in r.items() if k != "wall_time"} for r in rows(out)]
-    saved = json.loads((read_pointer(out / LATEST) / "state.json").read_text())
-    state = RunState.from_dict(saved["extra"]["run"])
-    stages = [(r.name, r.start, r.end, r.ended) for r in state.results]
-    tests = [json.loads(path.read_text()) for path in sorted(out.glob("stage-*/test.json"))]
-    return metrics, stages, tests
 
 
 @pytest.mark.slow

@@ -19,7 +19,7 @@ from lanrocli.train.runfolder import (
 )
 
 
-def test_publishing_points_at_the_new_checkpoints_and_prunes_the_rest(tmp_path: Path) -> None:
+def test_publishing_points_at_the_new_checkpoints_and_prunes_all_but_the_one_before(tmp_path: Path) -> None:
     folder = tmp_path / "stage-1-first"
     for name in ("step-1", "best-1", ".tmp-step-2"):
         (folder / name).mkdir(parents=True)
@@ -29,7 +29,11 @@ def test_publishing_points_at_the_new_checkpoints_and_prunes_the_rest(tmp_path: 
     publish(tmp_path, folder / "step-2", None)  # the stage's best stays where it was
     assert read_pointer(folder / LAST) == folder / "step-2" and read_pointer(folder / BEST) == folder / "best-1"
     assert read_pointer(tmp_path / LATEST) == folder / "step-2"
-    assert {p.name for p in folder.iterdir() if p.is_dir()} == {"step-2", "best-1"}
+    assert {p.name for p in folder.iterdir() if p.is_dir()} == {"step-1", "step-2", "best-1"}
+    for name in ("step-3", "best-3"):
+        (folder / name).mkdir()
+    publish(tmp_path, folder / "step-3", folder / "best-3")
+    assert {p.name for p in folder.iterdir() if p.is_dir()} == {"step-2", "step-3", "best-3"}
     assert {p.name for p in folder.iterdir() if p.is_file()} == {LAST, BEST}  # no pointer left half written
 
 
