@@ -340,16 +340,21 @@ def _read_partials(path: Path) -> list[dict[str, np.ndarray]]:
 
 def resolve_checkpoint(path: Path) -> Path:
     """The checkpoint directory that ``path`` names: a checkpoint itself, a pointer file (``latest``,
-    ``best``, ``last``) or a run folder, meaning its latest checkpoint."""
+    ``best``, ``last``) or a run folder, meaning its latest checkpoint. A pointer names a checkpoint
+    directory, never another pointer."""
     if path.is_dir() and (path / AGENT_FILE).is_file():
         return path
-    if path.is_dir() and (path / LATEST).is_file():
-        return resolve_checkpoint(read_pointer(path / LATEST))
-    if path.is_file():
-        return resolve_checkpoint(read_pointer(path))
     if not path.exists():
         raise CheckpointError(f"{path} does not exist")
-    raise CheckpointError(
-        f"{path} is neither a checkpoint (a directory with {AGENT_FILE}), a pointer file such as 'latest', "
-        f"nor a run folder with a '{LATEST}' pointer"
-    )
+    pointer = path / LATEST if path.is_dir() and (path / LATEST).is_file() else path
+    if not pointer.is_file():
+        raise CheckpointError(
+            f"{path} is neither a checkpoint (a directory with {AGENT_FILE}), a pointer file such as 'latest', "
+            f"nor a run folder with a '{LATEST}' pointer"
+        )
+    target = read_pointer(pointer)
+    if not (target.is_dir() and (target / AGENT_FILE).is_file()):
+        raise CheckpointError(
+            f"{pointer}, read as a pointer such as RUN/latest, names {target}, which is not a checkpoint"
+        )
+    return target
