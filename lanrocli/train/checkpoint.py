@@ -143,7 +143,7 @@ def _write_failure(directory: Path, contents: Checkpoint, error: OSError) -> str
     needed = _size_bound(contents)
     where = directory.parent if directory.parent.exists() else directory.parent.parent
     try:
-        free = f"{shutil.disk_usage(where).free / 2**20:,.0f} MB are free there"
+        free = f"{shutil.disk_usage(where).free / 2**20:,.1f} MB are free there"
     except OSError:
         free = "the free space there is unknown"
     reason = error.strerror or str(error)
