@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import json
+import shlex
 import sys
 import types
 import typing
@@ -369,16 +370,29 @@ def _test_episodes(path: Path) -> int:
 
 @app.command("check")
 def check_command(
-    curriculum: Annotated[Path, typer.Argument(help="Curriculum YAML file to validate.")],
-    quick: Annotated[bool, typer.Option("--quick", help="Show the plan --quick would run.")] = False,
+    curriculum: Annotated[
+        Path | None,
+        typer.Argument(help="Curriculum YAML file to validate. Optional with --quick (the built-in one)."),
+    ] = None,
+    quick: Annotated[
+        bool,
+        typer.Option(
+            "--quick",
+            help="Show the plan 'lanro train --quick' runs: the built-in curriculum as written, or FILE scaled down.",
+        ),
+    ] = False,
 ) -> None:
     """Validate a curriculum and print the resolved plan (stages, budgets, total steps) without training."""
+    if curriculum is None and not quick:
+        raise fail("give a curriculum file (e.g. curricula/reach.yaml), or --quick for the built-in one")
     plan = _load_plan(curriculum, quick, None, None)
     _print_plan(plan)
 
 
 def _load_plan(path: Path | None, quick: bool, seed: int | None, envs: int | None) -> Curriculum:
-    """The curriculum to run: from ``path`` or the built-in one, scaled by --quick, with overrides."""
+    """The curriculum to run, with the command line's overrides: the file at ``path``, scaled down by
+    ``quick`` (to try a file out); without a file, with ``quick``, the built-in curriculum exactly as
+    written (``curricula/quick.yaml``, whose budgets are small already)."""
     from lanrocli.train.curriculum import CurriculumError, builtin_curriculum, load_curriculum
 
     try:
@@ -390,7 +404,7 @@ def _load_plan(path: Path | None, quick: bool, seed: int | None, envs: int | Non
     except CurriculumError as error:
         count = len(error.problems)
         raise fail(f"{count} problem{'s' if count > 1 else ''} in the curriculum:\n{error}") from None
-    if quick:
+    if quick and path is not None:
         plan = plan.quick()
     return plan.with_overrides(seed=seed, envs=envs)
 
@@ -435,7 +449,9 @@ def _print_plan(plan: Curriculum) -> None:
 def train_command(
     curriculum: Annotated[
         Path | None,
-        typer.Argument(help="Curriculum YAML file. Optional with --quick (a built-in one) and with --resume."),
+        typer.Argument(
+            help="Curriculum YAML file. Optional with --quick (the built-in curricula/quick.yaml) and with --resume."
+        ),
     ] = None,
     out: Annotated[Path | None, typer.Option(help="Run folder (default: checkpoints/<curriculum name>).")] = None,
     seed: Annotated[int | None, typer.Option(min=0, help="Override the curriculum's seed.")] = None,
@@ -443,7 +459,12 @@ def train_command(
     device: Annotated[str | None, typer.Option(help="cpu or cuda (default: cuda if available).")] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the run in --out where it stopped.")] = False,
     quick: Annotated[
-        bool, typer.Option("--quick", help="Scale every budget and evaluation down to a run of a few minutes.")
+        bool,
+        typer.Option(
+            "--quick",
+            help="Without a file: the built-in curriculum (curricula/quick.yaml), a run of a few minutes that "
+            "learns. With a file: that file with every budget and evaluation scaled down, to try it out.",
+        ),
     ] = False,
 ) -> None:
     """Train an agent through a curriculum of stages, with evaluation, checkpoints and resume."""
@@ -510,23 +531,223 @@ def train_command(
 
     report = (out / "report.md").read_text()
     console.print(Markdown(report) if console.is_terminal else report, markup=False)
-    console.print(f"run folder: {out}   evaluate: lanro eval {out}   plot: lanro plot {out} --out curves.png")
+    run_folder = shlex.quote(str(out))
+    next_commands = {
+        f"lanro eval {run_folder}": "the final agent on its held-out test episodes",
+        f"lanro plot {run_folder} --out curves.png": "success against environment steps, stage by stage",
+        f"lanro play {run_folder}": "give it instructions of your own",
+    }
+    width = max(map(len, next_commands))
+    lines = [f"  {command:<{width}}  # {what}" for command, what in next_commands.items()]
+    console.print(f"run folder: {out}\nnext, try:", *lines, sep="\n", markup=False, highlight=False)
 
 
 @app.command("plot")
 def plot_command(
-    runs: Annotated[list[Path], typer.Argument(help="Run folders (several seeds are drawn as mean and band).")],
+    runs: Annotated[
+        list[Path],
+        typer.Argument(
+            help="Run folders or sweep folders: the seeds of one setting are drawn as their mean with a 95% bootstrap "
+            "band, one line per setting."
+        ),
+    ],
     out: Annotated[Path, typer.Option(help="Image to write (.png, .svg or .pdf).")] = Path("curves.png"),
-    title: Annotated[str | None, typer.Option(help="Figure title (default: the run names).")] = None,
+    title: Annotated[str | None, typer.Option(help="Figure title (default: the folder names).")] = None,
 ) -> None:
     """Plot success against environment steps, overall and on correction episodes, with stage boundaries."""
-    from lanrocli.train.plot import plot_runs
+    from lanrocli.sweep.groups import group_runs
+    from lanrocli.train.plot import plot_groups
 
     try:
-        path = plot_runs(runs, out, title)
+        groups = [(group.label, group.runs) for group in group_runs(runs)]
+        path = plot_groups(groups, out, title or ", ".join(run.name for run in runs))
     except (FileNotFoundError, ValueError) as error:
         raise fail(str(error)) from None
     Console().print(f"wrote {path}")
+
+
+class _ManyValues(typer.core.TyperCommand):
+    """Lets ``--seeds 0 1 2`` and ``--set a=1 b=2`` give several values after one option, as well as the usual
+    ``--seeds 0 --seeds 1``: each further value is read as if the option stood before it again."""
+
+    MANY: dict[str, Callable[[str], bool]] = {
+        "--seeds": lambda text: text.replace(",", "").isdigit(),
+        "--set": lambda text: "=" in text,
+        "--grid": lambda text: "=" in text,
+    }
+
+    def parse_args(self, ctx: typer.Context, args: list[str]) -> list[str]:
+        spread: list[str] = []
+        option, own_value = None, False
+        for arg in args:
+            if own_value:
+                spread.append(arg)
+                own_value = False
+            elif option is not None and not arg.startswith("-") and self.MANY[option](arg):
+                spread += [option, arg]
+            else:
+                option = arg if arg in self.MANY else None
+                own_value = option is not None
+                spread.append(arg)
+        return super().parse_args(ctx, spread)
+
+
+@app.command("sweep", cls=_ManyValues)
+def sweep_command(
+    curriculum: Annotated[
+        Path | None,
+        typer.Argument(help="Curriculum YAML file. Optional with --quick (the built-in one) and with --resume."),
+    ] = None,
+    out: Annotated[
+        Path | None, typer.Option(help="Sweep folder: sweep.yaml and one run folder per trial (default: sweeps/<name>).")
+    ] = None,
+    seeds: Annotated[
+        list[str] | None, typer.Option("--seeds", metavar="SEED ...", help="Seeds, each a trial: --seeds 0 1 2 (default: the curriculum's).")
+    ] = None,
+    changes: Annotated[
+        list[str] | None,
+        typer.Option("--set", metavar="KEY=VALUE ...", help="KEY=VALUE changed for every trial, by the curriculum's key paths: agent.critics=2."),
+    ] = None,
+    grid: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--grid",
+            metavar="KEY=V1,V2 ...",
+            help="KEY=V1,V2: one trial per combination of the grid's values, times the seeds: "
+            "stages[0].budget.steps=50000,100000.",
+        ),
+    ] = None,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="As for 'lanro train': every trial scaled down, or the built-in curriculum.")
+    ] = False,
+    resume: Annotated[
+        bool,
+        typer.Option("--resume", help="Continue the sweep in --out: unfinished trials from their checkpoints."),
+    ] = False,
+    address: Annotated[
+        str | None,
+        typer.Option(
+            help="A running Ray cluster to use: auto, or ray://HOST:PORT (default: a local Ray instance, started "
+            "and stopped here). Every node must see --out at the same path."
+        ),
+    ] = None,
+    cpus_per_trial: Annotated[
+        float | None,
+        typer.Option(min=0.01, help="CPUs per trial (default: one per environment worker, and one for the learner)."),
+    ] = None,
+    gpus_per_trial: Annotated[
+        float, typer.Option(min=0, help="GPUs per trial; above 0 the trials train on cuda.")
+    ] = 0.0,
+    max_concurrent: Annotated[
+        int | None,
+        typer.Option(min=1, help="Trials at once (default: as many as the CPUs allow, 1 on two cores)."),
+    ] = None,
+) -> None:
+    """Run a curriculum over seeds, settings and grids of settings on Ray: one ordinary run folder per trial."""
+    from lanrocli.sweep import plan as sweeps
+    from lanrocli.train.curriculum import CurriculumError
+
+    spec = None
+    if curriculum is not None or quick:
+        base = _load_plan(curriculum, quick, None, None)
+        try:
+            spec = sweeps.SweepSpec.from_options(
+                base, str(curriculum or "curricula/quick.yaml"), quick, seeds or [], changes or [], grid or []
+            )
+        except sweeps.SweepError as error:
+            raise fail(str(error)) from None
+    elif not resume:
+        raise fail("give a curriculum file (e.g. curricula/push.yaml), --quick for the built-in one, or --resume")
+    elif seeds or changes or grid:
+        raise fail("--seeds, --set and --grid need the curriculum file they apply to")
+    if out is None:
+        if spec is None:
+            raise fail("--resume without a curriculum file needs --out: the sweep folder to continue")
+        out = Path("sweeps") / spec.plan["name"]
+    try:
+        if spec is not None:
+            spec.resolve()
+        spec = sweeps.open_sweep(out, spec, resume)
+        trials = spec.resolve()
+    except CurriculumError as error:
+        count = len(error.problems)
+        raise fail(f"{count} problem{'s' if count > 1 else ''} in the sweep's curricula:\n{error}") from None
+    except sweeps.SweepError as error:
+        raise fail(str(error)) from None
+    try:
+        from lanrocli.sweep.execute import Resources, ray_instance, run_sweep
+    except ImportError as error:
+        raise fail(f"lanro sweep runs on Ray, which is not installed ({error}): pip install -e '.[sweep]'") from None
+    from lanrocli.stop import StopRequest
+    from lanrocli.sweep.protocol import ENDED_BEFORE, FAILED, FINISHED, PENDING, STOPPED, TrialProgress
+    from lanrocli.sweep_display import SweepDisplay
+
+    jobs = sweeps.trial_jobs(out, trials, "cuda" if gpus_per_trial > 0 else "cpu")
+    waiting = {job.name for job in jobs}
+    rows = [TrialProgress(trial.name, PENDING if trial.name in waiting else ENDED_BEFORE) for trial, _ in trials]
+    envs = max(plan.envs for _, plan in trials)
+    resources = Resources.choose(envs, cpus_per_trial, gpus_per_trial, max_concurrent, address)
+    hint = f"lanro sweep --out {shlex.quote(str(out))} --resume"
+    display = SweepDisplay.for_terminal(rows)
+    outcome = None
+    if jobs:
+        display.console.print(f"{len(jobs)} trial(s) of {len(trials)} to run on {resources}", highlight=False)
+        try:
+            # Ray's start installs a SIGTERM handler of its own: the stop request's comes after it.
+            with ray_instance(resources), StopRequest() as stop, display:
+                outcome = run_sweep(jobs, resources, out / sweeps.RAY_FOLDER, display, stop.requested, out / sweeps.STOP_FILE)
+        except KeyboardInterrupt:
+            raise fail(f"aborted: running trials ended without a checkpoint of this moment; resume with: {hint}", 130) from None
+        finally:
+            (out / sweeps.STOP_FILE).unlink(missing_ok=True)
+    statuses = {row.trial: row.status for row in rows} | (outcome.statuses if outcome else {})
+    console = display.console
+    for name, error in (outcome.errors if outcome else {}).items():
+        console.print(f"[bold red]trial {escape(name)} failed:[/] {escape(error)}", highlight=False)
+    done = sum(status in (FINISHED, ENDED_BEFORE) for status in statuses.values())
+    console.print(f"{done} of {len(statuses)} trials finished; sweep folder: {out}", highlight=False)
+    if done < len(statuses):
+        stopped = any(status == STOPPED for status in statuses.values())
+        console.print(f"{'stopped; ' if stopped else ''}resume with: {hint}", markup=False, highlight=False)
+        raise typer.Exit(1 if any(status == FAILED for status in statuses.values()) else 130)
+    console.print(f"next: lanro report {shlex.quote(str(out))}   lanro plot {shlex.quote(str(out))} --out curves.png", markup=False, highlight=False)
+
+
+@app.command("report")
+def report_command(
+    runs: Annotated[list[Path], typer.Argument(help="Run folders or sweep folders.")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
+    out: Annotated[Path | None, typer.Option(help="Also write the report as Markdown here.")] = None,
+    agent: Annotated[str, typer.Option(help="Which agent of each stage: last or best.")] = "last",
+) -> None:
+    """Aggregate runs and sweeps per task and stage, with bootstrap intervals over runs.
+
+    For each stage: the steps it took, and its agent's test figures (success, corrected, per kind, after a
+    negation) as the mean over runs with a 95% stratified bootstrap interval, and the interquartile mean from
+    five runs on. Runs that differ in their settings are grouped and compared side by side.
+    """
+    from lanrocli.sweep.report import ReportError, make_report, to_json, to_markdown
+
+    if agent not in ("last", "best"):
+        raise fail("--agent is last or best")
+    try:
+        report = make_report(runs, agent)
+    except ReportError as error:
+        raise fail(str(error)) from None
+    text = to_markdown(report)
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text)
+    if as_json:
+        typer.echo(json.dumps(to_json(report)))
+        return
+    console = Console()
+    if console.is_terminal:
+        from rich.markdown import Markdown
+
+        console.print(Markdown(text))
+    else:
+        typer.echo(text, nl=False)
 
 
 @app.command("play")

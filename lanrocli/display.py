@@ -1,4 +1,4 @@
-"""What ``lanro train`` shows while it runs, and how it stops when asked.
+"""What ``lanro train`` shows while it runs (and, from :mod:`lanrocli.stop`, how it stops when asked).
 
 In a terminal: a live progress bar over the current stage's budget with its promotion rule, environment
 steps per second, the last evaluation and the time left. Anywhere else (CI, nohup, a cluster job's log) a
@@ -8,18 +8,18 @@ evaluation, one per stage, and a progress line every minute.
 
 from __future__ import annotations
 
-import signal
-import sys
 import time
-from types import FrameType, TracebackType
 from typing import Any
 
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+from lanrocli.stop import StopRequest
 from lanrocli.train.curriculum import Stage
 from lanrocli.train.pipeline import CurriculumRun, RunObserver, StageResult
+
+__all__ = ["StopRequest", "TrainingDisplay"]
 
 PLAIN_INTERVAL = 60.0
 """Seconds between progress lines when the output is not a terminal."""
@@ -127,35 +127,3 @@ class TrainingDisplay(RunObserver):
         how = "promoted" if result.ended == "promoted" else "budget spent"
         line = f"stage {result.index + 1} {result.name} ended ({how}) after {result.end - result.start:,} steps"
         (self._progress.console if self._progress is not None else self.console).print(line)
-
-
-class StopRequest:
-    """Turns the first Ctrl-C (or SIGTERM, as a cluster sends before it kills a job) into a polite request
-    that the run checkpoints and stops; a second Ctrl-C aborts at once."""
-
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
-    def __init__(self) -> None:
-        self._requested = False
-        self._previous: dict[int, Any] = {}
-
-    def requested(self) -> bool:
-        return self._requested
-
-    def _handle(self, signum: int, frame: FrameType | None) -> None:
-        if self._requested:
-            signal.signal(signal.SIGINT, signal.default_int_handler)
-            raise KeyboardInterrupt
-        self._requested = True
-        print("\nstopping: writing a checkpoint (press Ctrl-C again to abort without one)", file=sys.stderr, flush=True)
-
-    def __enter__(self) -> StopRequest:
-        for signum in self.SIGNALS:
-            self._previous[signum] = signal.signal(signum, self._handle)
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        for signum, handler in self._previous.items():
-            signal.signal(signum, handler)

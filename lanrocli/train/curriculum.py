@@ -33,10 +33,12 @@ NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
 """Curriculum and stage names become folder names: no separators, no leading dot."""
 
 QUICK_TEST_EPISODES = 40
-"""Test episodes per agent and stage under ``--quick``: enough to see the pipeline work, in seconds."""
+"""Test episodes per agent and stage of a file scaled down by ``--quick``: enough to see the pipeline work,
+in seconds, not to tell one agent from another."""
 
 BUILTIN = "quick.yaml"
-"""The curriculum ``lanro train --quick`` runs without a file, shipped in the package's ``curricula``."""
+"""The curriculum ``lanro train --quick`` runs without a file, as written (its budgets are small already),
+shipped in the package's ``curricula``."""
 
 
 class _Settings(BaseModel):
@@ -229,7 +231,8 @@ class Curriculum(BaseModel):
         return yaml.safe_dump(self.model_dump(mode="json"), sort_keys=False)
 
     def quick(self) -> Curriculum:
-        """A copy small enough to run end to end in a minute or two on two cores, to try a file out."""
+        """A copy small enough to run end to end in a few minutes on two cores, to try a file out
+        (``lanro train FILE --quick``): too small for most curricula to learn anything."""
         data = self.model_dump()
         data["name"] += "-quick"
         for stage in data["stages"]:

@@ -2,21 +2,25 @@
 
 One panel for all episodes and one for the episodes in which a correction was spoken (``corrected_success``;
 a run written before that metric existed shows its ``correction_success``, the success on correction
-episodes, there instead). Several runs (seeds) are drawn as their mean
-with a band of one standard deviation, each run's curve first interpolated onto the steps at which any of
-them was evaluated; a run does not count beyond its last evaluation. Stage boundaries are dashed lines.
+episodes, there instead). Runs come in groups (the seeds of one setting; one group unless the caller
+groups them): each group is one line, the mean over its runs, with a band of the 95% bootstrap interval of
+that mean (:mod:`lanrocli.stats`), each run's curve first interpolated onto the steps at which any run of
+the group was evaluated; a run does not count beyond its last evaluation. Stage boundaries are dashed lines
+at the median over a group's runs of the step where each stage began.
 """
 
 from __future__ import annotations
 
 import csv
 import io
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from lanrocli.stats import bootstrap
 from lanrocli.train.runfolder import METRICS
 
 PANELS = (("success", "all episodes"), ("corrected_success", "episodes with a spoken correction"))
@@ -104,8 +108,13 @@ def _number(path: Path, line: int, row: dict[str, str], column: str, kind: type[
         raise ValueError(f"{path}:{line}: {column} is {row[column]!r}, not {what}; the line is damaged") from None
 
 
-def mean_and_spread(curves: Sequence[Curve], column: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Steps, mean and standard deviation over the runs that reached each step (NaN where none had a value)."""
+BAND_RESAMPLES = 2000
+"""Bootstrap resamples per plotted step: a band needs less precision than a reported interval."""
+
+
+def mean_and_band(curves: Sequence[Curve], column: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Steps, the mean over the runs that reached each step, and the 95% bootstrap interval of that mean
+    (NaN where no run had a value; the mean itself where one run had)."""
     grid = np.unique(np.concatenate([c.steps for c in curves]))
     stacked = np.full((len(curves), grid.size), np.nan)
     for i, curve in enumerate(curves):
@@ -115,47 +124,72 @@ def mean_and_spread(curves: Sequence[Curve], column: str) -> tuple[np.ndarray, n
         xs, ys = curve.steps[known], curve.values[column][known]
         inside = (grid >= xs[0]) & (grid <= xs[-1])
         stacked[i, inside] = np.interp(grid[inside], xs, ys)
-    counts = (~np.isnan(stacked)).sum(axis=0)
-    with np.errstate(invalid="ignore"):
-        mean = np.where(counts > 0, np.nansum(stacked, axis=0) / np.maximum(counts, 1), np.nan)
-        spread = np.sqrt(np.where(counts > 0, np.nansum((stacked - mean) ** 2, axis=0) / np.maximum(counts, 1), np.nan))
-    return grid, mean, spread
+    mean, low, high = (np.full(grid.size, np.nan) for _ in range(3))
+    for j in range(grid.size):
+        values = stacked[~np.isnan(stacked[:, j]), j]
+        if values.size == 1:
+            mean[j] = low[j] = high[j] = values[0]
+        elif values.size > 1:
+            estimate = bootstrap(values, reps=BAND_RESAMPLES)
+            mean[j], low[j], high[j] = estimate.value, estimate.low, estimate.high
+    return grid, mean, low, high
+
+
+def median_boundaries(curves: Sequence[Curve]) -> list[tuple[float, str]]:
+    """Each stage boundary at the median over the runs that reached it."""
+    most = max((len(c.boundaries) for c in curves), default=0)
+    boundaries = []
+    for k in range(most):
+        reached = [c.boundaries[k] for c in curves if len(c.boundaries) > k]
+        boundaries.append((float(np.median([step for step, _ in reached])), reached[0][1]))
+    return boundaries
+
+
+COLOURS = ("tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
 
 
 def plot_runs(runs: Sequence[Path], out: Path, title: str | None = None) -> Path:
-    """Draw the runs' curves into ``out`` (PNG, SVG or PDF, by its suffix)."""
+    """Draw the runs' curves, as one group, into ``out`` (PNG, SVG or PDF, by its suffix)."""
+    return plot_groups([("", runs)], out, title)
+
+
+def plot_groups(groups: Sequence[tuple[str, Sequence[Path]]], out: Path, title: str | None = None) -> Path:
+    """Draw one line per group of runs, labelled by the group's name, into ``out`` (PNG, SVG or PDF)."""
     import matplotlib
 
     matplotlib.use("Agg")  # files only: no display is needed, or wanted, on a cluster node
     import matplotlib.pyplot as plt
 
-    curves = [read_run(run) for run in runs]
+    read = [(label, [read_run(run) for run in runs]) for label, runs in groups]
     figure, axes = plt.subplots(1, len(PANELS), figsize=(11, 4), sharex=True, sharey=True)
-    for axis, (column, label) in zip(axes, PANELS):
-        steps, mean, spread = mean_and_spread(curves, column)
-        known = ~np.isnan(mean)
-        axis.plot(steps[known], mean[known], color="tab:red", label=f"mean of {len(curves)} run(s)")
-        if len(curves) > 1:
-            axis.fill_between(
-                steps[known], (mean - spread)[known], (mean + spread)[known], color="tab:red", alpha=0.2, label="± 1 sd"
-            )
-        for curve in curves:
-            for step, name in curve.boundaries:
-                axis.axvline(step, color="grey", linestyle="--", linewidth=0.8)
+    for axis, (column, panel) in zip(axes, PANELS):
+        drawn = False
+        for (label, curves), colour in zip(read, itertools.cycle(COLOURS)):
+            steps, mean, low, high = mean_and_band(curves, column)
+            known = ~np.isnan(mean)
+            drawn |= bool(known.any())
+            name = f"{label}: " if label else ""
+            axis.plot(steps[known], mean[known], color=colour, label=f"{name}mean of {len(curves)} run(s)")
+            if len(curves) > 1:
+                axis.fill_between(steps[known], low[known], high[known], color=colour, alpha=0.2)
+            line = colour if len(read) > 1 else "grey"
+            for step, stage in median_boundaries(curves):
+                axis.axvline(step, color=line, linestyle="--", linewidth=0.8)
                 axis.text(
-                    step, 0.97, name, transform=axis.get_xaxis_transform(), fontsize=7, color="grey", rotation=90,
+                    step, 0.97, stage, transform=axis.get_xaxis_transform(), fontsize=7, color=line, rotation=90,
                     va="top", ha="right",
                 )
-        if not known.any():
+        if not drawn:
             axis.text(0.5, 0.5, "no such episodes evaluated", transform=axis.transAxes, ha="center", color="grey")
-        axis.set_title(label)
+        axis.set_title(panel)
         axis.set_xlabel("environment steps")
         axis.set_ylim(-0.02, 1.02)
         axis.set_xlim(left=0)
         axis.grid(alpha=0.3)
     axes[0].set_ylabel("success rate")
-    axes[0].legend(loc="lower right")
-    figure.suptitle(title or ", ".join(c.name for c in curves))
+    axes[0].legend(loc="lower right", title="band: 95% bootstrap interval" if any(len(c) > 1 for _, c in read) else None)
+    runs = [curve for _, curves in read for curve in curves]
+    figure.suptitle(title or ", ".join(c.name for c in runs))
     figure.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(out, dpi=120)

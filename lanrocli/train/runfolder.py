@@ -59,6 +59,10 @@ LANGUAGE = "language"
 TMP_PREFIX = ".tmp-"
 LOCK = ".lock"
 SET_ASIDE = "set-aside"
+STATUS = "Status: "
+"""How the line of ``report.md`` that says whether the run has ended begins."""
+FINISHED = "finished"
+STOPPED_BY_BUDGET = "stopped: a budget ran out with on_budget: stop"
 _STAGE_FOLDER = re.compile(r"stage-\d+-.+")
 _STEP_CHECKPOINT = re.compile(r"step-(\d+)")
 _BEST_CHECKPOINT = re.compile(r"best-(\d+)")
@@ -302,6 +306,21 @@ class RunLock:
             self._file.close()
 
 
+def lock_holder(out: Path) -> str | None:
+    """Who holds the lock on ``out`` now (``process N``), or None when no one does, taking nothing: a sweep
+    resumed at once after a kill waits for the trials of the killed one to be gone."""
+    try:
+        with open(out / LOCK) as file:
+            try:
+                fcntl.flock(file, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return file.read().strip() or "another process"
+            fcntl.flock(file, fcntl.LOCK_UN)
+    except FileNotFoundError:
+        pass
+    return None
+
+
 # -- metrics.csv -------------------------------------------------------------------------------------------
 
 
@@ -407,10 +426,20 @@ def _stage_lines(curriculum: Curriculum, state: RunState) -> list[str]:
             f"{result.wall_time / 60:.1f} min |"
         )
     total = state.results[-1].end if state.results else 0
-    status = "finished" if state.finished else "running"
+    status = FINISHED if state.finished else "running"
     if state.stopped_early:
-        status = "stopped: a budget ran out with on_budget: stop"
-    return lines + ["", f"Status: {status}. {total:,} environment steps in all. (Wall time is cumulative.)"]
+        status = STOPPED_BY_BUDGET
+    return lines + ["", f"{STATUS}{status}. {total:,} environment steps in all. (Wall time is cumulative.)"]
+
+
+def run_ended(out: Path) -> bool:
+    """Whether the run in ``out`` has ended, as its ``report.md`` says once the last stage's tests are written: a
+    run killed after its last checkpoint but before those tests has not, and resuming it completes them."""
+    path = out / REPORT
+    if not path.is_file():
+        return False
+    ended = tuple(f"{STATUS}{status}." for status in (FINISHED, STOPPED_BY_BUDGET))
+    return any(line.startswith(ended) for line in path.read_text().splitlines())
 
 
 def _test_lines(tests: dict[int, tuple[str, dict[str, Any]]]) -> list[str]:

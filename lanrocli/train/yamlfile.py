@@ -268,6 +268,12 @@ def _replaced(path: KeyPath, parent: Any, child: Any) -> bool:
     return False
 
 
+def given_by(label: str, paths: list[KeyPath]) -> Marks:
+    """Marks for values that a command line gave rather than a file (``--set agent.critics=2``), so that a
+    problem with one of them names the option that gave it."""
+    return {path: _Mark(label, None) for path in paths}
+
+
 def validate(model: type[Model], data: dict[str, Any], marks: Marks, file: Path | str) -> Model:
     """``data`` as ``model``, or a ``CurriculumError`` with every problem at the line that has it."""
     try:

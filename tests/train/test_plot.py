@@ -11,7 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from lanrocli.cli import app
-from lanrocli.train.plot import read_run
+from lanrocli.train.plot import mean_and_band, median_boundaries, plot_groups, read_run
 from lanrocli.train.runfolder import METRIC_COLUMNS, METRICS
 
 
@@ -75,3 +75,22 @@ def test_a_metrics_file_that_is_not_text_is_an_error_at_its_line(tmp_path: Path)
         file.write(b"\xff\xfe\x00\x01\n")
     with pytest.raises(ValueError, match=f"{METRICS}:3: not UTF-8"):
         read_run(run)
+
+
+def test_groups_are_drawn_as_mean_and_bootstrap_band_with_median_boundaries(tmp_path: Path) -> None:
+    runs = []
+    for name, boundary, success in (("a", 200, 0.2), ("b", 300, 0.4), ("c", 400, 0.9)):
+        folder = tmp_path / name
+        folder.mkdir()
+        lines = [HEADER, metrics_line(0, 100, success), metrics_line(0, boundary, success), metrics_line(1, 500, success)]
+        (folder / METRICS).write_text("".join(line + "\n" for line in lines))
+        runs.append(folder)
+    curves = [read_run(run) for run in runs]
+    assert median_boundaries(curves) == [(300.0, "stage-2")]
+    steps, mean, low, high = mean_and_band(curves, "success")
+    assert steps.tolist() == [100, 200, 300, 400, 500]
+    assert mean[0] == pytest.approx(0.5) and low[0] == pytest.approx(0.2) and high[0] == pytest.approx(0.9)
+    one = mean_and_band(curves[:1], "success")
+    assert one[1][0] == one[2][0] == one[3][0] == 0.2  # one run: no band
+    out = plot_groups([("x=1", runs[:2]), ("x=2", runs[2:])], tmp_path / "groups.png")
+    assert out.stat().st_size > 10_000

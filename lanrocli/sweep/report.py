@@ -1,0 +1,298 @@
+"""``lanro report``: runs aggregated per task and stage, with bootstrap intervals over runs.
+
+For every stage a run has ended, its run folder holds how many steps the stage took and whether its rule
+promoted it (the run state in its latest checkpoint) and the test of the stage's agents on held-out episodes
+(``test.json``). For each group of runs (the seeds of one setting, :mod:`lanrocli.sweep.groups`), each
+task and each stage, every figure is given as the mean over runs with its 95% stratified bootstrap interval
+(:mod:`lanrocli.stats`), and as the interquartile mean too where at least five runs have it. With several
+groups the first is the reference: for each other group, the probability that one of its runs beats one of
+the reference's (higher success, fewer steps), with its interval.
+
+A run that has not ended every stage counts for the stages it has ended. Reading needs neither torch nor
+Ray, so a report is made in a moment on any machine that sees the folders.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from lanrocli.choices import Kind
+from lanrocli.stats import CONFIDENCE, IQM_RUNS, REPS, Estimate, bootstrap, iqm, probability_of_improvement
+from lanrocli.sweep.groups import Group, group_runs
+from lanrocli.train.runfolder import CONFIG, LATEST, TEST, CheckpointError, read_pointer, run_ended
+
+STATE = "state.json"
+"""The file of a checkpoint that holds the run's position in its curriculum (``checkpoint.STATE_FILE``)."""
+STEPS = "stage_steps"
+
+
+def _rate(record: dict[str, Any], *keys: str) -> float | None:
+    node: Any = record
+    for key in keys:
+        node = node.get(key) if isinstance(node, dict) else None
+    if not isinstance(node, dict) or not node.get("episodes"):
+        return None
+    return node.get("success")
+
+
+METRICS: dict[str, tuple[str, Callable[[dict[str, Any]], float | None]]] = {
+    "success": ("success", lambda r: r["success"] if r.get("episodes") else None),
+    "correction_episode_success": (
+        "correction episodes",
+        lambda r: r.get("correction_episode_success") if r.get("correction_episodes") else None,
+    ),
+    "corrected_success": ("corrected", lambda r: _rate(r, "corrected")),
+    **{
+        f"corrected_success_{kind.value}": (kind.value.replace("_", " "), lambda r, k=kind.value: _rate(r, "by_kind", k, "corrected"))
+        for kind in Kind
+    },
+    "corrected_success_negation": ("after a negation", lambda r: _rate(r, "by_negation", "with_negation")),
+}
+"""The test figures reported, by their names in ``metrics.csv``: label, and how to read it from a
+``test.json`` record (None where the run had no such episode)."""
+
+
+class ReportError(ValueError):
+    """Folders that cannot be reported on."""
+
+
+@dataclass(frozen=True)
+class StageOutcome:
+    """One stage of one run, once ended."""
+
+    task: str
+    index: int
+    name: str
+    steps: int
+    promoted: bool
+    figures: dict[str, float | None]
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    path: Path
+    ended: bool
+    stages: list[StageOutcome]
+
+
+def read_outcome(run: Path, agent: str = "last") -> RunOutcome:
+    """What the run folder ``run`` says about its ended stages, with the figures of their ``agent``."""
+    config = run / CONFIG
+    try:
+        plan = yaml.safe_load(config.read_text(encoding="utf-8"))
+        task, names = str(plan["task"]), [str(stage["name"]) for stage in plan["stages"]]
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError) as error:
+        raise ReportError(f"{run} is not a run folder with a readable {CONFIG} ({type(error).__name__}: {error})") from None
+    try:
+        state = json.loads((read_pointer(run / LATEST) / STATE).read_text())
+        results = state["extra"]["run"]["results"]
+    except FileNotFoundError:
+        results = []
+    except (CheckpointError, OSError, ValueError, KeyError, TypeError) as error:
+        raise ReportError(f"{run}: the latest checkpoint's run state cannot be read ({error})") from None
+    stages = []
+    for result in results:
+        index = int(result["index"])
+        test = run / f"stage-{index + 1}-{names[index]}" / TEST
+        record = json.loads(test.read_text()).get(agent, {}) if test.is_file() else {}
+        figures = {name: (read(record) if record else None) for name, (_, read) in METRICS.items()}
+        steps = int(result["end"]) - int(result["start"])
+        stages.append(StageOutcome(task, index, names[index], steps, result["ended"] == "promoted", figures))
+    return RunOutcome(run, run_ended(run), stages)
+
+
+@dataclass
+class Cell:
+    """One figure of one group at one stage: its estimate over the runs that have it."""
+
+    values: list[float]
+    mean: Estimate
+    iqm: Estimate | None
+
+    def to_dict(self) -> dict[str, Any]:
+        data: dict[str, Any] = {"mean": self.mean.value, "ci": list(self.mean.ci), "runs": self.mean.runs, "values": self.values}
+        if self.iqm is not None:
+            data |= {"iqm": self.iqm.value, "iqm_ci": list(self.iqm.ci)}
+        return data
+
+
+def _cell(values: list[float]) -> Cell | None:
+    if not values:
+        return None
+    return Cell(values, bootstrap(values), bootstrap(values, iqm) if len(values) >= IQM_RUNS else None)
+
+
+StageKey = tuple[str, int, str]
+"""(task, stage index, stage name)"""
+
+
+@dataclass
+class GroupReport:
+    group: Group
+    outcomes: list[RunOutcome]
+    cells: dict[StageKey, dict[str, Cell]] = field(default_factory=dict)
+    promoted: dict[StageKey, int] = field(default_factory=dict)
+
+
+@dataclass
+class Report:
+    agent: str
+    groups: list[GroupReport]
+    comparisons: dict[tuple[StageKey, str, int], Estimate]
+    """(stage, metric, group index) -> P(that group beats the first)."""
+
+    @property
+    def stages(self) -> list[StageKey]:
+        keys = {key for group in self.groups for key in group.cells}
+        return sorted(keys, key=lambda k: (k[0], k[1], k[2]))
+
+
+def _higher_is_better(values: list[float], metric: str) -> np.ndarray:
+    return -np.asarray(values, float) if metric == STEPS else np.asarray(values, float)
+
+
+def make_report(paths: list[Path], agent: str = "last") -> Report:
+    """The report on the runs and sweep folders ``paths``."""
+    try:
+        groups = group_runs(paths)
+    except ValueError as error:
+        raise ReportError(str(error)) from None
+    reports = []
+    for group in groups:
+        outcomes = [read_outcome(run, agent) for run in group.runs]
+        report = GroupReport(group, outcomes)
+        collected: dict[StageKey, dict[str, list[float]]] = {}
+        for outcome in outcomes:
+            for stage in outcome.stages:
+                key = (stage.task, stage.index, stage.name)
+                values = collected.setdefault(key, {})
+                values.setdefault(STEPS, []).append(float(stage.steps))
+                report.promoted[key] = report.promoted.get(key, 0) + stage.promoted
+                for name, value in stage.figures.items():
+                    if value is not None:
+                        values.setdefault(name, []).append(float(value))
+        for key, values in collected.items():
+            report.cells[key] = {name: cell for name, v in values.items() if (cell := _cell(v)) is not None}
+        reports.append(report)
+    comparisons = {}
+    if reports:
+        reference = reports[0]
+        for number, other in enumerate(reports[1:], start=1):
+            for key, cells in other.cells.items():
+                for metric, cell in cells.items():
+                    base = reference.cells.get(key, {}).get(metric)
+                    if base is not None:
+                        comparisons[(key, metric, number)] = probability_of_improvement(
+                            _higher_is_better(cell.values, metric), _higher_is_better(base.values, metric)
+                        )
+    return Report(agent, reports, comparisons)
+
+
+# -- output ------------------------------------------------------------------------------------------------
+
+
+def _label(group: GroupReport) -> str:
+    return group.group.label or "all runs"
+
+
+def to_json(report: Report) -> dict[str, Any]:
+    """Per group, stage and metric: ``mean``, ``ci``, ``runs`` (and ``iqm``, ``iqm_ci`` from five runs on)."""
+    groups = []
+    for number, group in enumerate(report.groups):
+        stages = []
+        for key in report.stages:
+            if key not in group.cells:
+                continue
+            metrics = {name: cell.to_dict() for name, cell in group.cells[key].items()}
+            if STEPS in metrics:
+                metrics[STEPS]["promoted"] = group.promoted.get(key, 0)
+            for (other_key, metric, other), estimate in report.comparisons.items():
+                if other_key == key and other == number and metric in metrics:
+                    metrics[metric]["beats_first"] = {"probability": estimate.value, "ci": list(estimate.ci)}
+            stages.append({"task": key[0], "stage": key[1] + 1, "name": key[2], "metrics": metrics})
+        groups.append(
+            {
+                "label": _label(group),
+                "settings": group.group.settings,
+                "runs": [str(outcome.path) for outcome in group.outcomes],
+                "ended": sum(outcome.ended for outcome in group.outcomes),
+                "stages": stages,
+            }
+        )
+    return {"agent": report.agent, "confidence": CONFIDENCE, "resamples": REPS, "groups": groups}
+
+
+def _number(metric: str, value: float) -> str:
+    return f"{value:,.0f}" if metric == STEPS else f"{100 * value:.1f}"
+
+
+def _estimate(metric: str, estimate: Estimate) -> str:
+    return f"{_number(metric, estimate.value)} [{_number(metric, estimate.low)}, {_number(metric, estimate.high)}]"
+
+
+def _row(report: Report, key: StageKey, metric: str, label: str, use_iqm: bool) -> list[str] | None:
+    """A table row of ``metric`` at stage ``key``, or None where no group has the figure."""
+    cells = [f"{label}, IQM" if use_iqm else label]
+    found = False
+    for number, group in enumerate(report.groups):
+        cell = group.cells.get(key, {}).get(metric)
+        estimate = None if cell is None else cell.iqm if use_iqm else cell.mean
+        text = "-"
+        if estimate is not None:
+            found = True
+            text = _estimate(metric, estimate)
+            if estimate.runs < len(group.outcomes):
+                text += f" ({estimate.runs})"
+            if metric == STEPS and not use_iqm:
+                text += f", {group.promoted.get(key, 0)} promoted"
+        cells.append(text)
+        if number:
+            comparison = None if use_iqm else report.comparisons.get((key, metric, number))
+            cells.append("" if comparison is None else f"{comparison.value:.2f} [{comparison.low:.2f}, {comparison.high:.2f}]")
+    return cells if found else None
+
+
+def to_markdown(report: Report) -> str:
+    """The report as Markdown: one table per task and stage, one column per group."""
+    runs = sum(len(group.outcomes) for group in report.groups)
+    lines = [
+        f"# Report: {runs} run{'s' * (runs != 1)}",
+        "",
+        f"Per task and stage: the steps the stage took, and its `{report.agent}` agent on the stage's held-out test "
+        f"episodes (success in %). Mean over runs with a {CONFIDENCE:.0%} stratified bootstrap interval "
+        f"({REPS:,} resamples), and the interquartile mean (IQM) where at least {IQM_RUNS} runs have the figure; "
+        "(n): the runs that have it, where fewer than the group's.",
+        "",
+    ]
+    for group in report.groups:
+        ended = sum(outcome.ended for outcome in group.outcomes)
+        names = ", ".join(outcome.path.name for outcome in group.outcomes)
+        lines.append(f"- {_label(group)}: {len(group.outcomes)} runs ({names}), {ended} ended")
+    reference = _label(report.groups[0]) if report.groups else ""
+    if len(report.groups) > 1:
+        lines += [
+            "",
+            f"P(beats {reference}): the probability that a run of the group to its left beats one of {reference} "
+            "(higher success, fewer steps), with its interval.",
+        ]
+    labels = {STEPS: "steps in stage"} | {metric: label for metric, (label, _) in METRICS.items()}
+    for key in report.stages:
+        header = ["figure"]
+        for number, group in enumerate(report.groups):
+            header += [f"{_label(group)} ({len(group.outcomes)} runs)"] + ([f"P(beats {reference})"] if number else [])
+        lines += ["", f"## {key[0]}: stage {key[1] + 1}, {key[2]}", "", "| " + " | ".join(header) + " |"]
+        lines.append("|" + "---|" * len(header))
+        with_iqm = any(cell.iqm is not None for group in report.groups for cell in group.cells.get(key, {}).values())
+        for metric, label in labels.items():
+            for use_iqm in (False, True) if with_iqm else (False,):
+                row = _row(report, key, metric, label, use_iqm)
+                if row is not None:
+                    lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"

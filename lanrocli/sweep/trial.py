@@ -1,0 +1,105 @@
+"""One trial of a sweep, in the Ray worker that runs it: its run folder started, or resumed from its own
+checkpoints, exactly as ``lanro train`` and ``lanro train --resume`` would, and its progress reported to Ray
+Tune. The run folder is the record; Tune only carries progress to the sweep's display.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+import yaml
+from ray import tune
+
+from lanrocli.sweep.plan import trial_started
+from lanrocli.sweep.protocol import FINISHED, RUNNING, STOPPED, StopFile, TrialJob, TrialProgress
+from lanrocli.train.curriculum import Curriculum, Stage
+from lanrocli.train.pipeline import CurriculumRun, RunObserver, StageResult
+from lanrocli.train.runfolder import lock_holder
+from lanrocli.train.yamlfile import validate
+
+REPORT_SECONDS = 5.0
+"""Seconds between progress reports; evaluations and stage ends are reported at once."""
+LOCK_WAIT_SECONDS = 60.0
+"""How long a trial waits for its run folder's lock: the trials of a sweep killed a moment ago take a few
+seconds to die with their Ray instance."""
+
+
+def _percent(value: Any) -> str:
+    return "-" if value in ("", None) else f"{100 * float(value):.0f}%"
+
+
+class TuneReporter(RunObserver):
+    """Reports a run's progress with ``tune.report``: at every evaluation and stage, and every few seconds."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.evaluation = ""
+        self._last = time.monotonic()
+        self._last_steps = 0
+        self.rate: float | None = None
+
+    def send(self, run: CurriculumRun, status: str = RUNNING, line: str = "") -> None:
+        now, steps = time.monotonic(), run.trainer.progress.env_steps
+        if steps > self._last_steps and now > self._last:
+            self.rate = (steps - self._last_steps) / (now - self._last)
+        self._last, self._last_steps = now, steps
+        index = min(run.state.stage, len(run.curriculum.stages) - 1)
+        stage = f"{index + 1}/{len(run.curriculum.stages)} {run.curriculum.stages[index].name}"
+        progress = TrialProgress(self.name, status, stage, steps, self.rate, self.evaluation, line)
+        tune.report(progress.to_dict())
+
+    def on_stage_start(self, run: CurriculumRun, stage: Stage) -> None:
+        self.send(run, line=f"stage {run.state.stage + 1}/{len(run.curriculum.stages)} {stage.name} starts")
+
+    def on_step(self, run: CurriculumRun) -> None:
+        if time.monotonic() - self._last >= REPORT_SECONDS:
+            self.send(run)
+
+    def on_evaluation(self, run: CurriculumRun, row: dict[str, Any]) -> None:
+        self.evaluation = (
+            f"success {_percent(row['success'])}, corrected {_percent(row['corrected_success'])} "
+            f"of {row['corrected_episodes']}"
+        )
+        self.send(run, line=f"step {row['env_steps']:,}: evaluation {self.evaluation}")
+
+    def on_stage_end(self, run: CurriculumRun, result: StageResult) -> None:
+        how = "promoted" if result.ended == "promoted" else "budget spent"
+        self.send(run, line=f"stage {result.index + 1} {result.name} ended ({how}) after {result.end - result.start:,} steps")
+
+
+def _wait_for_lock(out: Path) -> None:
+    deadline = time.monotonic() + LOCK_WAIT_SECONDS
+    while lock_holder(out) is not None and time.monotonic() < deadline:
+        time.sleep(0.5)
+
+
+def train_trial(job: TrialJob) -> None:
+    """Run the trial ``job`` until its curriculum ends or the sweep asks it to stop (then with a checkpoint).
+    A run that has ended already only completes tests a kill interrupted."""
+    out = Path(job.out)
+    stop = StopFile(Path(job.stop_file))
+    reporter = TuneReporter(job.name)
+    if stop.requested():
+        return
+    if job.device == "cpu":
+        torch.set_num_threads(1)
+    plan = validate(Curriculum, yaml.safe_load(job.curriculum), {}, f"the curriculum of trial {job.name}")
+    if trial_started(out):
+        _wait_for_lock(out)
+        run = CurriculumRun.resume(out, plan, job.device, reporter)
+    else:
+        run = CurriculumRun.start(plan, out, job.device, reporter)
+    try:
+        for note in run.notes:
+            reporter.send(run, line=f"note: {note}")
+        if run.state.finished:
+            run.complete_tests()
+            finished = True
+        else:
+            finished = run.run(should_stop=stop.requested)
+    finally:
+        run.close()
+    reporter.send(run, FINISHED if finished else STOPPED, "finished" if finished else "stopped: checkpoint written")
