@@ -15,6 +15,9 @@ from lanrocli.language import grammar_vocabulary
 
 runner = CliRunner()
 
+QUICK = Path(__file__).parents[1] / "lanrocli" / "curricula" / "quick.yaml"
+"""The curriculum ``lanro train --quick`` runs without a file."""
+
 
 def test_help_lists_commands() -> None:
     result = runner.invoke(app, ["--help"])
@@ -124,10 +127,14 @@ def test_eval_writes_a_gif(tmp_path) -> None:
 
 @pytest.mark.slow
 def test_quick_training_run_then_eval_plot_and_refusals(tmp_path) -> None:
-    """The README's first command, on the built-in curriculum, and what can be done with its run folder."""
+    """The README's first command on its built-in curriculum, scaled down further (``quick.yaml --quick``) to
+    keep the suite short, and what can be done with its run folder."""
     out = tmp_path / "run"
-    result = runner.invoke(app, ["train", "--quick", "--out", str(out)])
+    quick = ["train", str(QUICK), "--quick", "--out", str(out)]
+    result = runner.invoke(app, quick)
     assert result.exit_code == 0, result.output
+    for command in (f"lanro eval {out}", f"lanro plot {out} --out curves.png", f"lanro play {out}"):
+        assert command in result.output  # what to try next, with the run folder filled in
     for name in ("config.yaml", "metrics.csv", "report.md", "latest"):
         assert (out / name).is_file()
     for stage in ("stage-1-single", "stage-2-corrections", "stage-3-negations"):
@@ -152,16 +159,18 @@ def test_quick_training_run_then_eval_plot_and_refusals(tmp_path) -> None:
     assert json.loads(blank.output) == tested["language"]["blank"]
     best = runner.invoke(app, ["eval", str(out / "stage-1-single" / "best"), "--episodes", "2"])
     assert best.exit_code == 0 and "2 objects, colour" in best.output
-    assert runner.invoke(app, ["eval", str(out), "--task", "push"]).exit_code == 2
+    assert runner.invoke(app, ["eval", str(out), "--task", "reach"]).exit_code == 2
 
     plot = runner.invoke(app, ["plot", str(out), "--out", str(tmp_path / "curves.png")])
     assert plot.exit_code == 0 and (tmp_path / "curves.png").stat().st_size > 10_000
 
-    again = runner.invoke(app, ["train", "--quick", "--out", str(out)])
+    again = runner.invoke(app, quick)
     assert again.exit_code == 2 and "--resume" in again.output
-    changed = runner.invoke(app, ["train", "--quick", "--out", str(out), "--resume", "--seed", "7"])
+    changed = runner.invoke(app, [*quick, "--resume", "--seed", "7"])
     assert changed.exit_code == 2 and "-seed: 0" in changed.output and "+seed: 7" in changed.output
-    finished = runner.invoke(app, ["train", "--quick", "--out", str(out), "--resume"])
+    unscaled = runner.invoke(app, ["train", "--quick", "--out", str(out), "--resume"])
+    assert unscaled.exit_code == 2 and "+name: push-quick\n" in unscaled.output  # the built-in file as written
+    finished = runner.invoke(app, [*quick, "--resume"])
     assert finished.exit_code == 0 and "finished already" in finished.output
 
 
@@ -174,6 +183,24 @@ def test_every_shipped_curriculum_checks(tmp_path) -> None:
         result = runner.invoke(app, ["check", str(path)])
         assert result.exit_code == 0, result.output
         assert "environment steps in all" in result.output
+
+
+def test_quick_without_a_file_runs_quick_yaml_as_written_and_with_a_file_scales_it() -> None:
+    from lanrocli.cli import _load_plan
+    from lanrocli.train.curriculum import builtin_curriculum, load_curriculum
+
+    written = load_curriculum(QUICK)
+    assert _load_plan(None, True, None, None) == builtin_curriculum() == written
+    assert _load_plan(QUICK, True, None, None) == written.quick() != written
+    assert _load_plan(None, True, 3, 4) == written.with_overrides(seed=3, envs=4)
+
+    builtin = runner.invoke(app, ["check", "--quick"])
+    assert builtin.exit_code == 0, builtin.output
+    assert builtin.output == runner.invoke(app, ["check", str(QUICK)]).output
+    scaled = runner.invoke(app, ["check", str(QUICK), "--quick"])
+    assert scaled.exit_code == 0 and f"{written.name}-quick:" in scaled.output
+    missing = runner.invoke(app, ["check"])
+    assert missing.exit_code == 2 and "--quick" in missing.output
 
 
 def test_check_reports_every_problem_with_its_place_and_exits_2(tmp_path) -> None:

@@ -383,23 +383,24 @@ def test_with_overrides(tmp_path: Path) -> None:
 
 
 def test_builtin_curriculum() -> None:
+    """What ``lanro train --quick`` runs as written: the file a user reads at curricula/quick.yaml, the
+    paper's three stages in budgets of a few minutes, and a test set large enough for its figure to mean
+    something."""
     curriculum = builtin_curriculum()
+    assert curriculum == load_curriculum(Path(__file__).parents[2] / "curricula" / "quick.yaml")
     assert [stage.name for stage in curriculum.stages] == ["single", "corrections", "negations"]
-    assert (curriculum.name, curriculum.task, curriculum.max_objects, curriculum.total_steps) == ("reach-basics", "reach", 3, 4500)
-    assert (curriculum.eval.every, curriculum.eval.episodes, curriculum.learning_starts, curriculum.envs) == (500, 5, 256, 2)
+    assert (curriculum.name, curriculum.task, curriculum.max_objects, curriculum.total_steps) == ("push-quick", "push", 2, 7500)
+    assert (curriculum.eval.every, curriculum.eval.episodes, curriculum.learning_starts, curriculum.envs) == (1000, 20, 256, 2)
+    assert curriculum.test.episodes == 100 and curriculum.agent.batch_size == 64
     single, corrections, negations = curriculum.stages
-    assert single.promote is not None and (single.promote.success, single.promote.on) == (0.9, "overall")
+    assert single.promote is not None and (single.promote.success, single.promote.on, single.promote.patience) == (0.8, "overall", 2)
     assert corrections.promote is not None and (corrections.promote.success, corrections.promote.on) == (
         0.7,
         "corrected",
     )
-    assert (corrections.env.correction_rate, corrections.env.max_delay) == (0.5, 5)
-    assert (negations.env.objects, negations.env.mode, negations.env.negations, negations.promote) == (
-        3,
-        "colour_shape",
-        True,
-        None,
-    )
+    assert (single.env.correction_rate, corrections.env.correction_rate, negations.env.correction_rate) == (0, 0.5, 0.5)
+    assert (corrections.env.negations, negations.env.negations, negations.promote) == (False, True, None)
+    assert [stage.env.settings().episode_limit for stage in curriculum.stages] == [15, 30, 30]
 
 
 def test_diff_curricula(tmp_path: Path) -> None:
