@@ -151,7 +151,7 @@ def test_quick_training_run_then_eval_plot_and_refusals(tmp_path) -> None:
     report = json.loads(evaluated.output)
     # By default a checkpoint meets its stage's test episodes, so its numbers are report.md's.
     assert report == tested["last"]
-    assert report["env"]["objects"] == 3 and report["env"]["negations"] is True
+    assert report["env"]["objects"] == 2 and report["env"]["negations"] is True
     assert set(report["corrected"]) == {"episodes", "success", "ci"}
     others = json.loads(runner.invoke(app, ["eval", str(out), "--episodes", "3", "--seed", "5", "--json"]).output)
     assert others["episodes"] == 3 and others["episodes_from"] == {"test_set": False, "first_seed": 5}
