@@ -665,10 +665,9 @@ def sweep_command(
             raise fail("--resume without a curriculum file needs --out: the sweep folder to continue")
         out = Path("sweeps") / spec.plan["name"]
     try:
-        if spec is not None:
-            spec.resolve()
+        trials = spec.resolve() if spec is not None else None  # every trial valid before the folder is touched
         spec = sweeps.open_sweep(out, spec, resume)
-        trials = spec.resolve()
+        trials = trials or spec.resolve()
     except CurriculumError as error:
         count = len(error.problems)
         raise fail(f"{count} problem{'s' if count > 1 else ''} in the sweep's curricula:\n{error}") from None

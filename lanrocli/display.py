@@ -34,8 +34,40 @@ def _rule(stage: Stage) -> str:
     return f"promote at {stage.promote.on} success >= {stage.promote.success:g} ({stage.promote.patience}x)"
 
 
-def _rate(value: Any) -> str:
+def _percent(value: Any) -> str:
     return "-" if value in ("", None) else f"{100 * float(value):.0f}%"
+
+
+def evaluation_summary(row: dict[str, Any]) -> str:
+    """An evaluation's row of ``metrics.csv`` in words: ``success 88%, corrected 70% of 20``."""
+    return f"success {_percent(row['success'])}, corrected {_percent(row['corrected_success'])} of {row['corrected_episodes']}"
+
+
+def stage_end_line(result: StageResult) -> str:
+    how = "promoted" if result.ended == "promoted" else "budget spent"
+    return f"stage {result.index + 1} {result.name} ended ({how}) after {result.end - result.start:,} steps"
+
+
+class StepRate:
+    """Environment steps per second over the last ``RATE_WINDOW`` seconds."""
+
+    def __init__(self) -> None:
+        self._samples: list[tuple[float, int]] = []
+
+    def clear(self) -> None:
+        self._samples.clear()
+
+    def last_sample(self) -> float | None:
+        """When the last sample was taken (``time.monotonic``), or None before the first."""
+        return self._samples[-1][0] if self._samples else None
+
+    def add(self, now: float, steps: int) -> float | None:
+        """Record ``steps`` at ``now``; the rate over the window, or None while it spans no time."""
+        self._samples.append((now, steps))
+        while now - self._samples[0][0] > RATE_WINDOW:
+            self._samples.pop(0)
+        (t0, s0), (t1, s1) = self._samples[0], self._samples[-1]
+        return (s1 - s0) / (t1 - t0) if t1 > t0 else None
 
 
 class TrainingDisplay(RunObserver):
@@ -47,7 +79,7 @@ class TrainingDisplay(RunObserver):
         self._progress: Progress | None = None
         self._task: Any = None
         self._last_eval = "no evaluation yet"
-        self._samples: list[tuple[float, int]] = []
+        self._rate = StepRate()
         self._next_line = 0.0
 
     @classmethod
@@ -80,7 +112,7 @@ class TrainingDisplay(RunObserver):
     def on_stage_start(self, run: CurriculumRun, stage: Stage) -> None:
         index = run.state.stage
         header = f"stage {index + 1}/{len(run.curriculum.stages)} {stage.name}: {stage.budget.steps:,} steps, {_rule(stage)}"
-        self._samples.clear()
+        self._rate.clear()
         if self._progress is not None:
             self._progress.console.print(header)
             if self._task is not None:
@@ -93,15 +125,12 @@ class TrainingDisplay(RunObserver):
             self._next_line = time.monotonic() + PLAIN_INTERVAL
 
     def on_step(self, run: CurriculumRun) -> None:
-        now = time.monotonic()
-        if self._samples and now - self._samples[-1][0] < 0.25:
+        now, last = time.monotonic(), self._rate.last_sample()
+        if last is not None and now - last < 0.25:
             return
         steps = run.trainer.progress.env_steps
-        self._samples.append((now, steps))
-        while now - self._samples[0][0] > RATE_WINDOW:
-            self._samples.pop(0)
-        (t0, s0), (t1, s1) = self._samples[0], self._samples[-1]
-        rate = f"{(s1 - s0) / (t1 - t0):.0f}" if t1 > t0 else "-"
+        per_second = self._rate.add(now, steps)
+        rate = "-" if per_second is None else f"{per_second:.0f}"
         done = steps - run.state.stage_start
         if self._progress is not None and self._task is not None:
             self._progress.update(self._task, completed=done, rate=rate, evaluation=self._last_eval)
@@ -113,10 +142,7 @@ class TrainingDisplay(RunObserver):
             )
 
     def on_evaluation(self, run: CurriculumRun, row: dict[str, Any]) -> None:
-        self._last_eval = (
-            f"evaluation: success {_rate(row['success'])}, corrected {_rate(row['corrected_success'])}"
-            f" of {row['corrected_episodes']}"
-        )
+        self._last_eval = f"evaluation: {evaluation_summary(row)}"
         line = escape(f"[{row['stage_name']}] step {row['env_steps']:,}: {self._last_eval}")
         if self._progress is not None:
             self._progress.console.print(line)
@@ -124,6 +150,4 @@ class TrainingDisplay(RunObserver):
             self.console.print(line)
 
     def on_stage_end(self, run: CurriculumRun, result: StageResult) -> None:
-        how = "promoted" if result.ended == "promoted" else "budget spent"
-        line = f"stage {result.index + 1} {result.name} ended ({how}) after {result.end - result.start:,} steps"
-        (self._progress.console if self._progress is not None else self.console).print(line)
+        (self._progress.console if self._progress is not None else self.console).print(stage_end_line(result))

@@ -26,10 +26,17 @@ import yaml
 from lanrocli.choices import Kind
 from lanrocli.stats import CONFIDENCE, IQM_RUNS, REPS, Estimate, bootstrap, iqm, probability_of_improvement
 from lanrocli.sweep.groups import Group, group_runs
-from lanrocli.train.runfolder import CONFIG, LATEST, TEST, CheckpointError, read_pointer, run_ended
+from lanrocli.train.runfolder import (
+    CONFIG,
+    LATEST,
+    STATE_FILE,
+    TEST,
+    CheckpointError,
+    read_pointer,
+    run_ended,
+    stage_folder,
+)
 
-STATE = "state.json"
-"""The file of a checkpoint that holds the run's position in its curriculum (``checkpoint.STATE_FILE``)."""
 STEPS = "stage_steps"
 
 
@@ -91,7 +98,7 @@ def read_outcome(run: Path, agent: str = "last") -> RunOutcome:
     except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError) as error:
         raise ReportError(f"{run} is not a run folder with a readable {CONFIG} ({type(error).__name__}: {error})") from None
     try:
-        state = json.loads((read_pointer(run / LATEST) / STATE).read_text())
+        state = json.loads((read_pointer(run / LATEST) / STATE_FILE).read_text())
         results = state["extra"]["run"]["results"]
     except FileNotFoundError:
         results = []
@@ -100,7 +107,7 @@ def read_outcome(run: Path, agent: str = "last") -> RunOutcome:
     stages = []
     for result in results:
         index = int(result["index"])
-        test = run / f"stage-{index + 1}-{names[index]}" / TEST
+        test = run / stage_folder(index, names[index]) / TEST
         record = json.loads(test.read_text()).get(agent, {}) if test.is_file() else {}
         figures = {name: (read(record) if record else None) for name, (_, read) in METRICS.items()}
         steps = int(result["end"]) - int(result["start"])

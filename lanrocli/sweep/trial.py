@@ -13,6 +13,7 @@ import torch
 import yaml
 from ray import tune
 
+from lanrocli.display import StepRate, evaluation_summary, stage_end_line
 from lanrocli.sweep.plan import trial_started
 from lanrocli.sweep.protocol import FINISHED, RUNNING, STOPPED, StopFile, TrialJob, TrialProgress
 from lanrocli.train.curriculum import Curriculum, Stage
@@ -27,25 +28,20 @@ LOCK_WAIT_SECONDS = 60.0
 seconds to die with their Ray instance."""
 
 
-def _percent(value: Any) -> str:
-    return "-" if value in ("", None) else f"{100 * float(value):.0f}%"
-
-
 class TuneReporter(RunObserver):
     """Reports a run's progress with ``tune.report``: at every evaluation and stage, and every few seconds."""
 
     def __init__(self, name: str) -> None:
         self.name = name
         self.evaluation = ""
-        self._last = time.monotonic()
-        self._last_steps = 0
+        self._rate = StepRate()
         self.rate: float | None = None
 
     def send(self, run: CurriculumRun, status: str = RUNNING, line: str = "") -> None:
         now, steps = time.monotonic(), run.trainer.progress.env_steps
-        if steps > self._last_steps and now > self._last:
-            self.rate = (steps - self._last_steps) / (now - self._last)
-        self._last, self._last_steps = now, steps
+        rate = self._rate.add(now, steps)
+        if rate is not None:
+            self.rate = rate
         index = min(run.state.stage, len(run.curriculum.stages) - 1)
         stage = f"{index + 1}/{len(run.curriculum.stages)} {run.curriculum.stages[index].name}"
         progress = TrialProgress(self.name, status, stage, steps, self.rate, self.evaluation, line)
@@ -55,19 +51,16 @@ class TuneReporter(RunObserver):
         self.send(run, line=f"stage {run.state.stage + 1}/{len(run.curriculum.stages)} {stage.name} starts")
 
     def on_step(self, run: CurriculumRun) -> None:
-        if time.monotonic() - self._last >= REPORT_SECONDS:
+        last = self._rate.last_sample()
+        if last is None or time.monotonic() - last >= REPORT_SECONDS:
             self.send(run)
 
     def on_evaluation(self, run: CurriculumRun, row: dict[str, Any]) -> None:
-        self.evaluation = (
-            f"success {_percent(row['success'])}, corrected {_percent(row['corrected_success'])} "
-            f"of {row['corrected_episodes']}"
-        )
+        self.evaluation = evaluation_summary(row)
         self.send(run, line=f"step {row['env_steps']:,}: evaluation {self.evaluation}")
 
     def on_stage_end(self, run: CurriculumRun, result: StageResult) -> None:
-        how = "promoted" if result.ended == "promoted" else "budget spent"
-        self.send(run, line=f"stage {result.index + 1} {result.name} ended ({how}) after {result.end - result.start:,} steps")
+        self.send(run, line=stage_end_line(result))
 
 
 def _wait_for_lock(out: Path) -> None:

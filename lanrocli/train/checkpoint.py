@@ -36,11 +36,18 @@ import torch
 
 from lanrocli.agent.buffer import ReplayBuffer
 from lanrocli.agent.settings import MOVED, SACSettings
-from lanrocli.train.runfolder import LATEST, CheckpointError, fsync_dir, fsync_file, read_pointer, temporary
+from lanrocli.train.runfolder import (
+    LATEST,
+    STATE_FILE,
+    CheckpointError,
+    fsync_dir,
+    fsync_file,
+    read_pointer,
+    temporary,
+)
 
 AGENT_FILE = "agent.pt"
 BUFFER_FILE = "buffer.npz"
-STATE_FILE = "state.json"
 PARTIAL_FILE = "partial.npz"
 MANIFEST_FILE = "manifest.json"
 FORMAT = 2

@@ -318,7 +318,7 @@ class CurriculumRun:
         """The stage's last and best agents on its held-out test episodes, read back from their
         checkpoints; the final agent of the run also with a blank and another object's sentence."""
         stage = self.curriculum.stages[result.index]
-        folder = self.out / stage_folder(result.index, stage)
+        folder = self.out / stage_folder(result.index, stage.name)
         episodes = self.curriculum.test.episodes
         device = self.trainer.device
         record = {
@@ -337,7 +337,7 @@ class CurriculumRun:
         """Measure stages that ended but were not measured yet: a run killed while testing does it on resume."""
         for result in self.state.results:
             stage = self.curriculum.stages[result.index]
-            if not (self.out / stage_folder(result.index, stage) / TEST).is_file():
+            if not (self.out / stage_folder(result.index, stage.name) / TEST).is_file():
                 self._test(result)
 
     def _enter(self, index: int) -> None:
@@ -368,7 +368,7 @@ class CurriculumRun:
     def _checkpoint(self, stage_index: int, best: bool) -> None:
         """A resumable checkpoint in the stage's folder (``last``, and the run's ``latest``), and, when the
         evaluation just made was the stage's best, the agent alone as ``best``."""
-        folder = self.out / stage_folder(stage_index, self.curriculum.stages[stage_index])
+        folder = self.out / stage_folder(stage_index, self.curriculum.stages[stage_index].name)
         steps = self.trainer.progress.env_steps
         metrics = self.out / METRICS
         files = {CONFIG: (self.out / CONFIG).read_text(), METRICS: metrics.read_text() if metrics.is_file() else ""}

@@ -148,11 +148,6 @@ def median_boundaries(curves: Sequence[Curve]) -> list[tuple[float, str]]:
 COLOURS = ("tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
 
 
-def plot_runs(runs: Sequence[Path], out: Path, title: str | None = None) -> Path:
-    """Draw the runs' curves, as one group, into ``out`` (PNG, SVG or PDF, by its suffix)."""
-    return plot_groups([("", runs)], out, title)
-
-
 def plot_groups(groups: Sequence[tuple[str, Sequence[Path]]], out: Path, title: str | None = None) -> Path:
     """Draw one line per group of runs, labelled by the group's name, into ``out`` (PNG, SVG or PDF)."""
     import matplotlib

@@ -44,7 +44,7 @@ from lanrocli.choices import Kind
 from lanrocli.envs.evaluation import METRIC_NAMES
 
 if TYPE_CHECKING:
-    from lanrocli.train.curriculum import Curriculum, Stage
+    from lanrocli.train.curriculum import Curriculum
     from lanrocli.train.pipeline import RunState
 
 CONFIG = "config.yaml"
@@ -59,6 +59,8 @@ LANGUAGE = "language"
 TMP_PREFIX = ".tmp-"
 LOCK = ".lock"
 SET_ASIDE = "set-aside"
+STATE_FILE = "state.json"
+"""The file of a checkpoint that holds the run's position in its curriculum beside the trainer's state."""
 STATUS = "Status: "
 """How the line of ``report.md`` that says whether the run has ended begins."""
 FINISHED = "finished"
@@ -87,8 +89,9 @@ class RunError(RuntimeError):
 # -- names -------------------------------------------------------------------------------------------------
 
 
-def stage_folder(index: int, stage: Stage) -> str:
-    return f"stage-{index + 1}-{stage.name}"
+def stage_folder(index: int, name: str) -> str:
+    """The folder of the stage at ``index`` named ``name``: ``stage-2-corrections``."""
+    return f"stage-{index + 1}-{name}"
 
 
 def step_checkpoint(env_steps: int) -> str:
@@ -399,7 +402,7 @@ def render_report(curriculum: Curriculum, state: RunState, out: Path) -> str:
     ]
     tests = {}
     for result in state.results:
-        path = out / stage_folder(result.index, curriculum.stages[result.index]) / TEST
+        path = out / stage_folder(result.index, curriculum.stages[result.index].name) / TEST
         if path.is_file():
             tests[result.index] = (result.name, json.loads(path.read_text()))
     if tests:
