@@ -1,11 +1,11 @@
 """Training throughput: environment steps/s and gradient updates/s of a real training run, split into time
 spent waiting for the simulation, sampling (and relabelling) batches, and updating the networks.
 
-Settings: reach with 2 objects, 2 environments (subprocesses), one update per environment step, batch 256,
-updates starting after ``--learning-starts`` steps. If stable-baselines3 is installed, its SAC
-(``MultiInputPolicy``, same batch, same update ratio, same environment, same steps) runs in the same session
-and the ratio is printed. With ``--rounds N`` the two alternate N times and the medians are reported, which
-evens out a shared machine's drift better than one long run each.
+Settings: reach with 2 objects, 2 environments (subprocesses), one update per environment step, batch 256
+(``--batch-size``, for both agents), updates starting after ``--learning-starts`` steps. If stable-baselines3
+is installed, its SAC (``MultiInputPolicy``, same batch, same update ratio, same environment, same steps) runs
+in the same session and the ratio is printed. With ``--rounds N`` the two alternate N times and the medians
+are reported, which evens out a shared machine's drift better than one long run each.
 
     python benchmarks/train_throughput.py --steps 2000 --rounds 3
 """
@@ -43,9 +43,11 @@ class Stopwatch:
         return timed
 
 
-def run_ours(steps: int, envs: int, learning_starts: int, seed: int, architecture: str) -> dict[str, float]:
+def run_ours(
+    steps: int, envs: int, learning_starts: int, seed: int, architecture: str, batch_size: int
+) -> dict[str, float]:
     settings = TrainSettings(task="reach", env=EnvSettings(objects=2), seed=seed, envs=envs, learning_starts=learning_starts)
-    trainer = Trainer(settings, SACSettings(batch_size=256, architecture=architecture))
+    trainer = Trainer(settings, SACSettings(batch_size=batch_size, architecture=architecture))
     simulation, sampling, updating = Stopwatch(), Stopwatch(), Stopwatch()
     trainer.run(envs)  # start the environments before the clock
     collector = trainer._collector
@@ -69,7 +71,7 @@ def run_ours(steps: int, envs: int, learning_starts: int, seed: int, architectur
     }
 
 
-def run_sb3(steps: int, envs: int, learning_starts: int, seed: int) -> dict[str, float] | None:
+def run_sb3(steps: int, envs: int, learning_starts: int, seed: int, batch_size: int) -> dict[str, float] | None:
     try:
         from stable_baselines3 import SAC
         from stable_baselines3.common.vec_env import SubprocVecEnv
@@ -79,7 +81,7 @@ def run_sb3(steps: int, envs: int, learning_starts: int, seed: int) -> dict[str,
     model = SAC(
         "MultiInputPolicy",
         vec,
-        batch_size=256,
+        batch_size=batch_size,
         train_freq=1,
         gradient_steps=-1,  # one update per environment step collected, as ours
         learning_starts=learning_starts,
@@ -101,6 +103,7 @@ def main() -> None:
     parser.add_argument("--learning-starts", type=int, default=500)
     parser.add_argument("--threads", type=int, default=1, help="torch threads (both agents)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--batch-size", type=int, default=256, help="of both agents")
     parser.add_argument("--architecture", choices=["flat", "objects"], default="flat", help="of our agent")
     parser.add_argument("--rounds", type=int, default=1, help="alternate ours and stable-baselines3 this many times")
     parser.add_argument("--json", action="store_true")
@@ -111,8 +114,8 @@ def main() -> None:
 
     rounds = []
     for _ in range(args.rounds):
-        result = run_ours(args.steps, args.envs, args.learning_starts, args.seed, args.architecture)
-        sb3 = run_sb3(args.steps, args.envs, args.learning_starts, args.seed)
+        result = run_ours(args.steps, args.envs, args.learning_starts, args.seed, args.architecture, args.batch_size)
+        sb3 = run_sb3(args.steps, args.envs, args.learning_starts, args.seed, args.batch_size)
         if sb3 is not None:
             result.update(sb3, ratio=result["env_steps_per_s"] / sb3["sb3_env_steps_per_s"])
         rounds.append(result)

@@ -442,7 +442,7 @@ def _print_plan(plan: Curriculum) -> None:
             if getattr(default, f.name) != getattr(settings, f.name)
         }
         console.print(f"{name}: default settings ({type(settings).__name__}){', except ' + str(changed) if changed else ''}")
-    console.print(f"{plan.updates_per_step} update(s) per environment step, from step {plan.learning_starts:,}")
+    console.print(f"{plan.updates_per_step:g} update(s) per environment step, from step {plan.learning_starts:,}")
 
 
 @app.command("train")

@@ -61,7 +61,11 @@ class EpisodeData:
 class Batch:
     """Sampled transitions. ``done``: the step ended by success. ``named``: for a relabelled transition the
     object slot its new sentence singles out, -1 for the others. ``slots``: where in the buffer each
-    transition is stored, to look up what the batch does not carry."""
+    transition is stored, to look up what the batch does not carry.
+
+    ``steps``: how many stored steps each transition spans. With n-step sampling ``reward`` is the return
+    discounted over those steps, ``next_obs`` and ``next_instruction`` are read after the last of them, and
+    the Bellman target discounts its bootstrap by ``gamma ** steps``."""
 
     obs: np.ndarray  # float32 [B, N]
     instruction: np.ndarray  # int64 [B, L]
@@ -72,6 +76,7 @@ class Batch:
     done: np.ndarray  # bool [B]
     named: np.ndarray  # int64 [B]
     slots: np.ndarray  # int64 [B]
+    steps: np.ndarray  # int64 [B], 1 for one-step transitions
 
     @property
     def relabelled(self) -> np.ndarray:
@@ -262,6 +267,8 @@ class ReplayBuffer:
         relabel_ratio: float = 0.0,
         correction_share: float = 0.0,
         hindsight_share: float = 0.0,
+        n_step: int = 1,
+        gamma: float = 1.0,
     ) -> Batch:
         """``batch_size`` transitions drawn with replacement: a share ``hindsight_share`` (binomially) from
         the transitions whose episode achieves the task on an identifiable object at that step or later, the
@@ -272,9 +279,15 @@ class ReplayBuffer:
         steps at or after t that achieved the task on one, then one of those objects uniformly. Its reward
         and done flag are recomputed from the stored ``achieved`` flags at step t. A share
         ``correction_share`` of the relabelled sentences are corrections rather than plain instructions.
+
+        With ``n_step`` above 1 each transition spans up to ``n_step`` stored steps of its episode (fewer where
+        the episode ends first, or where its goal, the relabelled one included, is achieved first): see
+        :meth:`_extend`; ``gamma`` discounts the rewards along the way.
         """
         if self.size == 0:
             raise ValueError("cannot sample from an empty replay buffer")
+        if n_step < 1:
+            raise ValueError(f"n_step must be at least 1, got {n_step}")
         d = self.data
         idx = self._draw(batch_size, rng, hindsight_share)
         instruction = d["instruction"][idx].astype(np.int64)
@@ -284,6 +297,7 @@ class ReplayBuffer:
 
         relabel = (d["future_count"][idx] > 0) & (rng.random(batch_size) < relabel_ratio)
         named = np.full(batch_size, -1, dtype=np.int64)
+        target = np.zeros(0, dtype=np.int64)
         rows = idx[relabel]
         if rows.size:
             step = d["achieving_slot"][d["future_first"][rows] + rng.integers(0, d["future_count"][rows])]
@@ -301,7 +315,7 @@ class ReplayBuffer:
             done[relabel] = success
             named[relabel] = target
 
-        return Batch(
+        batch = Batch(
             obs=d["obs"][idx],
             instruction=instruction,
             action=d["action"][idx],
@@ -311,7 +325,45 @@ class ReplayBuffer:
             done=done,
             named=named,
             slots=idx,
+            steps=np.ones(batch_size, dtype=np.int64),
         )
+        if n_step > 1:
+            self._extend(batch, relabel, target, n_step, gamma)
+        return batch
+
+    def _extend(self, batch: Batch, relabel: np.ndarray, target: np.ndarray, n_step: int, gamma: float) -> None:
+        """Turn one-step transitions into n-step ones, in place.
+
+        A transition at step t spans steps t..t+k-1, where k is ``n_step``, cut short at the episode's last
+        step and at the first step that achieves its goal (which then ends it as done). A stored transition
+        keeps the goal the episode gave it step by step, so the rewards after a correction are those of the
+        corrected goal, as the one-step target's bootstrap already reads the corrected sentence; a relabelled
+        one keeps its sentence, and its rewards and done flags are recomputed from the stored ``achieved``
+        flags of the object it names, as for one step. The return sums the rewards discounted by ``gamma``;
+        the later steps' entropy bonus is left out, as is usual for n-step SAC.
+        """
+        d = self.data
+        slots = batch.slots
+        last = d["episode_start"][slots] + d["episode_length"][slots] - 1
+        offsets = np.arange(n_step)
+        window = np.minimum(slots[:, None] + offsets, last[:, None])  # [B, n], repeats the last step past the end
+        inside = slots[:, None] + offsets <= last[:, None]
+        reward = d["reward"][window].astype(np.float64)
+        achieved = d["terminated"][window].copy()
+        if target.size:
+            hit = d["achieved"][window[relabel], target[:, None]]
+            achieved[relabel] = hit
+            reward[relabel] = np.where(hit, SUCCESS_REWARD, FAILURE_REWARD)
+        ends = achieved & inside
+        done = ends.any(axis=1)
+        steps = np.where(done, np.argmax(ends, axis=1) + 1, inside.sum(axis=1))
+        counted = offsets[None, :] < steps[:, None]
+        batch.reward = (np.where(counted, reward * gamma**offsets, 0.0).sum(axis=1)).astype(np.float32)
+        batch.done = done
+        batch.steps = steps.astype(np.int64)
+        final = slots + steps - 1
+        batch.next_obs = d["next_obs"][final]
+        batch.next_instruction[~relabel] = d["next_instruction"][final[~relabel]].astype(np.int64)
 
     def _draw(self, batch_size: int, rng: np.random.Generator, hindsight_share: float) -> np.ndarray:
         if hindsight_share == 0.0:

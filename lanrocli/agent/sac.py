@@ -144,6 +144,7 @@ class SACAgent:
         action = self._tensor(batch.action, torch.float32)
         reward = self._tensor(batch.reward, torch.float32)
         not_done = 1.0 - self._tensor(batch.done, torch.float32)
+        discount = s.gamma ** self._tensor(batch.steps, torch.float32)
         alpha = self.log_alpha.detach().exp()
 
         # The critic's, the actor's and the target critic's encoders read this and the next sentences (they
@@ -160,7 +161,7 @@ class SACAgent:
         with torch.no_grad():
             next_action, next_log_prob = self.actor.sample(next_obs, next_actor_language, self.generator, next_present)
             next_q = self.target_critic(next_obs, next_target_language, next_action, next_present)
-            target_q = reward + s.gamma * not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
+            target_q = reward + discount * not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
             if s.clip_target:
                 target_q = target_q.clamp(FAILURE_REWARD / (1.0 - s.gamma), SUCCESS_REWARD)
         # Object-wise readers weigh the objects once per network: the same attention serves the networks and
@@ -235,7 +236,7 @@ class SACAgent:
             return totals
         draw = sampling.sampling()
         for _ in range(n_updates):
-            batch = buffer.sample(self.settings.batch_size, rng, **draw)
+            batch = buffer.sample(self.settings.batch_size, rng, **draw, gamma=self.settings.gamma)
             for name, value in self.update(batch).items():
                 totals[name] = totals.get(name, 0.0) + value
         return {name: value / n_updates for name, value in totals.items()}

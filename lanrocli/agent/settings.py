@@ -121,18 +121,26 @@ class BufferSettings:
     it: when random arms touched an object in 8% of reach episodes, mostly within a few steps, 1.5% of the
     stored transitions could be relabelled at all; uniform batches held half a success on average, and the
     critic valued the touching step itself at -13 instead of 0 after 130k steps."""
+    n_step: int = 1
+    """Bellman targets over this many stored steps (n-step returns), cut at the episode's end and at its
+    goal's success: a sparse success reaches the states that led to it in 1/n of the updates. 1 is the
+    paper's one-step target."""
 
     def __post_init__(self) -> None:
+        if not 1 <= self.n_step <= 100:
+            raise ValueError(f"n_step must be a number of steps from 1 to 100, got {self.n_step}")
         if not 1 <= self.size < 2**31:
             raise ValueError(f"size must be a positive number of transitions below 2**31, got {self.size}")
         for name in ("relabel_ratio", "correction_share", "hindsight_share"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
 
-    def sampling(self) -> dict[str, float]:
-        """The keyword arguments of :meth:`ReplayBuffer.sample` these settings ask for."""
+    def sampling(self) -> dict[str, float | int]:
+        """The keyword arguments of :meth:`ReplayBuffer.sample` these settings ask for (the discount is the
+        agent's)."""
         return {
             "relabel_ratio": self.relabel_ratio,
             "correction_share": self.correction_share if self.relabel_corrections else 0.0,
             "hindsight_share": self.hindsight_share,
+            "n_step": self.n_step,
         }

@@ -171,8 +171,8 @@ class Curriculum(BaseModel):
     """Parallel environments collecting experience."""
     learning_starts: int = Field(1000, ge=0)
     """Environment steps collected, by the untrained policy, before the first update."""
-    updates_per_step: int = Field(1, ge=0)
-    """Gradient updates per collected environment step."""
+    updates_per_step: float = Field(1.0, ge=0)
+    """Gradient updates per collected environment step; 0.5 updates every other step."""
     agent: AgentConfig = Field(default_factory=AgentConfig)
     buffer: BufferConfig = Field(default_factory=BufferConfig)
     eval: EvalConfig = Field(default_factory=EvalConfig)

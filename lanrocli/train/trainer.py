@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -37,6 +38,12 @@ SUCCESS_WINDOW = 100
 """Training episodes over which the reported training success is averaged."""
 
 
+def updates_due(env_steps: int, envs: int, updates_per_step: float) -> int:
+    """Updates owed for the ``envs`` steps collected after ``env_steps``: the whole updates that
+    ``updates_per_step`` accrues over them, so that fractions add up over the run. It depends on the step
+    count alone, which a checkpoint holds, so a resumed run updates when the uninterrupted one would."""
+    return math.floor((env_steps + envs) * updates_per_step) - math.floor(env_steps * updates_per_step)
+
 
 @dataclass(frozen=True)
 class TrainSettings:
@@ -49,8 +56,8 @@ class TrainSettings:
     eval_episodes: int = 20
     learning_starts: int = 1000
     """Environment steps collected before the first update."""
-    updates_per_step: int = 1
-    """Gradient updates per collected environment step."""
+    updates_per_step: float = 1.0
+    """Gradient updates per collected environment step; a fraction such as 0.5 updates every other step."""
     buffer: BufferSettings = field(default_factory=BufferSettings)
     object_slots: int | None = None
     """Objects the observation and the buffer have room for; ``None``: the stage's objects. A curriculum
@@ -215,8 +222,8 @@ class Trainer:
                 return False
             actions = self.agent.act(collector.observation)
             collector.step_async(actions)
-            if self.buffer.size >= max(s.learning_starts, 1) and s.updates_per_step > 0:
-                n = s.updates_per_step * s.envs
+            n = updates_due(self.progress.env_steps, s.envs, s.updates_per_step)
+            if self.buffer.size >= max(s.learning_starts, 1) and n > 0:
                 self.last_metrics = self.agent.learn(self.buffer, self.rng, n, s.buffer)
                 self.progress.updates += n
             for episode in collector.step_wait():

@@ -200,3 +200,98 @@ def test_ring_keeps_whole_episodes_only(capacity: int, lengths: list[int]) -> No
         newest = np.flatnonzero(valid & (stored[:, 0] == i))
         assert newest.size == len(episode), "the episode just added is whole and sampleable"
 
+
+
+def _hand_episode(goal_achieved: bool) -> EpisodeData:
+    """Six steps among a red and a blue cube; the goal is the red one (achieved at the last step or never),
+    the blue one is achieved from step 2 on. Observations carry (0, step)."""
+    from lanrocli.language import ObjectProps
+
+    steps = 6
+    achieved = np.zeros((steps, 2), dtype=bool)
+    achieved[2:, 1] = True
+    achieved[5, 0] = goal_achieved
+    obs = np.zeros((steps + 1, OBS_DIM), dtype=np.float32)
+    obs[:, 1] = np.arange(steps + 1)
+    sentence = np.tile(VOCAB.encode("push the red cube"), (steps, 1))
+    return EpisodeData(
+        observations=obs[:-1],
+        next_observations=obs[1:],
+        instructions=sentence,
+        next_instructions=sentence.copy(),
+        actions=np.zeros((steps, ACTION_DIM), dtype=np.float32),
+        rewards=np.where(achieved[:, 0], 0.0, -1.0).astype(np.float32),
+        terminated=achieved[:, 0].copy(),
+        achieved=achieved,
+        goal_index=0,
+        objects=(ObjectProps("red", "cube"), ObjectProps("blue", "cube")),
+        task="push",
+    )
+
+
+@pytest.mark.parametrize(
+    ("goal_achieved", "relabel_ratio", "expected"),
+    [
+        # step: (return, steps spanned, done), with gamma 0.9 and n 3, worked out by hand
+        (True, 0.0, {0: (-2.71, 3, False), 3: (-1.9, 3, True), 4: (-1.0, 2, True), 5: (0.0, 1, True)}),
+        (False, 0.0, {0: (-2.71, 3, False), 3: (-2.71, 3, False), 4: (-1.9, 2, False), 5: (-1.0, 1, False)}),
+        # relabelled to the blue cube, achieved from step 2 on: the window stops there, done
+        (False, 1.0, {0: (-1.9, 3, True), 1: (-1.0, 2, True), 2: (0.0, 1, True), 5: (0.0, 1, True)}),
+    ],
+)
+def test_n_step_returns_match_a_hand_computation(
+    goal_achieved: bool, relabel_ratio: float, expected: dict[int, tuple[float, int, bool]]
+) -> None:
+    buffer = ReplayBuffer(100, OBS_DIM, ACTION_DIM, max_objects=3, seed=0)
+    buffer.add_episode(_hand_episode(goal_achieved))
+    batch = buffer.sample(400, np.random.default_rng(0), relabel_ratio=relabel_ratio, n_step=3, gamma=0.9)
+    seen = set()
+    for row in range(400):
+        step = int(batch.obs[row, 1])
+        if relabel_ratio == 1.0 and step < 5:
+            assert batch.named[row] == 1
+        if step not in expected:
+            continue
+        seen.add(step)
+        ret, steps, done = expected[step]
+        assert batch.reward[row] == pytest.approx(ret, abs=1e-6), step
+        assert (int(batch.steps[row]), bool(batch.done[row])) == (steps, done), step
+        assert batch.next_obs[row, 1] == step + steps, "the bootstrap reads the state after the last step spanned"
+    assert seen == set(expected)
+
+
+def _n_step_by_loop(
+    episode: EpisodeData, step: int, named: int, n: int, gamma: float
+) -> tuple[float, int, bool, np.ndarray]:
+    """The n-step transition from ``step``, written out one step at a time."""
+    ret, k = 0.0, 0
+    for t in range(step, min(step + n, len(episode))):
+        success = bool(episode.achieved[t, named]) if named >= 0 else bool(episode.terminated[t])
+        reward = (0.0 if success else -1.0) if named >= 0 else float(episode.rewards[t])
+        ret += gamma**k * reward
+        k += 1
+        if success:
+            return ret, k, True, episode.next_observations[t]
+    return ret, k, False, episode.next_observations[step + k - 1]
+
+
+@pytest.mark.parametrize("n_step", [1, 2, 5])
+def test_n_step_sampling_agrees_with_a_step_by_step_loop(n_step: int) -> None:
+    buffer, added = _filled(capacity=3000, episodes=150, seed=11)
+    rng = np.random.default_rng(12)
+    for _ in range(5):
+        batch = buffer.sample(256, rng, relabel_ratio=0.8, correction_share=0.5, n_step=n_step, gamma=0.98)
+        for row in range(256):
+            episode, step = _origin(batch, row, added)
+            ret, k, done, next_obs = _n_step_by_loop(episode, step, int(batch.named[row]), n_step, 0.98)
+            assert batch.reward[row] == pytest.approx(ret, abs=1e-5)
+            assert (int(batch.steps[row]), bool(batch.done[row])) == (k, done)
+            assert np.array_equal(batch.next_obs[row], next_obs)
+            if batch.named[row] < 0:
+                assert np.array_equal(batch.next_instruction[row], episode.next_instructions[step + k - 1])
+
+
+def test_n_step_needs_at_least_one_step() -> None:
+    buffer, _ = _filled(capacity=300, episodes=5)
+    with pytest.raises(ValueError, match="n_step"):
+        buffer.sample(8, np.random.default_rng(0), n_step=0)

@@ -38,6 +38,7 @@ def _batch(rng: np.random.Generator, size: int = 64) -> Batch:
         done=np.ones(size, dtype=bool),
         named=np.full(size, -1),
         slots=np.arange(size),
+        steps=np.ones(size, dtype=np.int64),
     )
 
 
@@ -191,6 +192,20 @@ def test_same_seed_same_batches_same_parameters() -> None:
     assert not all(torch.equal(x, y) for x, y in zip(_parameters(a), _parameters(other)))
 
 
+def test_a_transition_spanning_k_steps_bootstraps_with_gamma_to_the_k() -> None:
+    """Two steps under gamma 0.9 give the same target, hence the same update, as one step under 0.81."""
+    batch = _batch(np.random.default_rng(2))
+    batch.done[:] = False
+    two_steps = dataclasses.replace(batch, steps=np.full(batch.steps.shape, 2))
+    a = _agent(seed=5, gamma=0.9, clip_target=False)
+    b = _agent(seed=5, gamma=0.81, clip_target=False)
+    metrics_a, metrics_b = a.update(two_steps), b.update(batch)
+    assert metrics_a["target_q_mean"] == pytest.approx(metrics_b["target_q_mean"], rel=1e-6)
+    assert all(torch.allclose(x, y, atol=1e-6) for x, y in zip(_parameters(a), _parameters(b)))
+    one_step = _agent(seed=5, gamma=0.9, clip_target=False).update(batch)
+    assert one_step["target_q_mean"] != pytest.approx(metrics_a["target_q_mean"], rel=1e-3)
+
+
 def test_building_and_training_leave_torch_global_generator_alone() -> None:
     torch.manual_seed(123)
     state = torch.get_rng_state()
@@ -324,6 +339,26 @@ def test_learn_samples_relabelled_batches_from_a_buffer() -> None:
     metrics = agent.learn(buffer, rng, n_updates=3)
     assert agent.updates == 3 and set(metrics) >= {"critic_loss", "actor_loss", "alpha", "alpha_loss", "q_mean"}
     assert all(np.isfinite(v) for v in metrics.values())
+
+
+def test_learn_draws_n_step_batches_when_the_buffer_settings_ask() -> None:
+    rng = np.random.default_rng(0)
+    buffer = ReplayBuffer(2000, OBS_DIM, ACTION_DIM, seed=0)
+    for i in range(50):
+        buffer.add_episode(random_episode(rng, i))
+    spans = []
+    original = buffer.sample
+
+    def recorded(*args: object, **kwargs: object) -> Batch:
+        batch = original(*args, **kwargs)  # type: ignore[arg-type]
+        spans.append(batch.steps)
+        return batch
+
+    buffer.sample = recorded  # type: ignore[method-assign]
+    _agent(batch_size=64).learn(buffer, rng, n_updates=2, sampling=BufferSettings(n_step=3))
+    assert max(int(s.max()) for s in spans) == 3
+    with pytest.raises(ValueError, match="n_step"):
+        BufferSettings(n_step=0)
 
 
 def test_fixed_temperature_stays_fixed() -> None:

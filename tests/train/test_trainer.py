@@ -18,7 +18,7 @@ from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.checkpoint import AGENT_FILE, load_agent_state
 from lanrocli.train.runfolder import LATEST, CheckpointError, read_pointer
-from lanrocli.train.trainer import Trainer, TrainSettings, pick_device
+from lanrocli.train.trainer import Trainer, TrainSettings, pick_device, updates_due
 
 SETTINGS = TrainSettings(
     task="push",
@@ -52,6 +52,23 @@ def test_tiny_training_run_end_to_end() -> None:
     assert any(not torch.equal(a, b) for a, b in zip(before, parameters(trainer)))
     report = trainer.evaluate(first_seed=0)
     assert report.overall.episodes == 2 and all(r.length <= 100 for r in report.results)
+
+
+@pytest.mark.parametrize(("rate", "envs"), [(1.0, 2), (2.0, 1), (0.5, 2), (0.5, 1), (0.3, 3), (0.0, 2)])
+def test_fractional_update_rates_add_up_over_a_run(rate: float, envs: int) -> None:
+    due = [updates_due(steps, envs, rate) for steps in range(0, 3000, envs)]
+    assert sum(due) == int(3000 * rate + 1e-9)  # nothing lost to rounding, however it is split
+    assert max(due) - min(due) <= 1  # and spread evenly, not bunched
+    if rate == int(rate):
+        assert set(due) == {int(rate) * envs}  # whole rates keep their every-step behaviour
+
+
+def test_half_an_update_per_step_makes_half_the_updates() -> None:
+    trainer = Trainer(dataclasses.replace(SETTINGS, updates_per_step=0.5), AGENT)
+    trainer.run(200)
+    trainer.close()
+    ready = trainer.progress.updates  # updates start once 64 stored steps are whole episodes
+    assert 0 < ready and ready <= (200 - 64) / 2 + 1
 
 
 def test_random_starts_are_for_training_only() -> None:
