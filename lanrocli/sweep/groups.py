@@ -56,7 +56,15 @@ def _signature(run: Path) -> dict[str, Any] | None:
         data = yaml.safe_load(config.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
         raise ValueError(f"{config} cannot be read: {error}") from None
-    return {key: value for key, value in flatten(data).items() if key not in IGNORED}
+    return {key: _plain(value) for key, value in flatten(data).items() if key not in IGNORED}
+
+
+def _plain(value: Any) -> Any:
+    """A whole float as an int: a setting that became a float (``updates_per_step``) is written ``1.0`` by
+    newer runs and ``1`` by older ones, and the two are the same setting."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
 
 
 def group_runs(paths: list[Path]) -> list[Group]:

@@ -97,6 +97,16 @@ def test_settings_are_grouped_and_compared(runs: list[Path]) -> None:
     assert "| success | 70.0 [60.0, 80.0] | 100.0 [100.0, 100.0] | 1.00 [1.00, 1.00] |" in text
 
 
+def test_a_setting_written_as_int_or_as_float_is_one_setting(tmp_path: Path) -> None:
+    runs = [make_run(tmp_path / f"r{seed}", seed, [(40, True, 0.5, None)]) for seed in (0, 1, 2)]
+    for run, rate in zip(runs, (1, 1.0, 0.5)):
+        plan = yaml.safe_load((run / CONFIG).read_text())
+        plan["updates_per_step"] = rate
+        (run / CONFIG).write_text(yaml.safe_dump(plan))
+    groups = group_runs(runs)
+    assert [(g.label, len(g.runs)) for g in groups] == [("updates_per_step=1", 2), ("updates_per_step=0.5", 1)]
+
+
 def test_a_sweep_folder_stands_for_its_trials(tmp_path: Path) -> None:
     path = tiny(tmp_path)
     spec = SweepSpec.from_options(load_curriculum(path), str(path), False, ["0", "1"], [], [])
