@@ -19,6 +19,11 @@ class Task(StrEnum):
     GRASP = "grasp"
     LIFT = "lift"
 
+    @property
+    def gripper(self) -> bool:
+        """Whether the arm uses its fingers: the action gains a fourth number, the finger opening."""
+        return self in (Task.GRASP, Task.LIFT)
+
 
 class Mode(StrEnum):
     """Which properties vary between the objects of a scene."""

@@ -191,6 +191,8 @@ def _env_summary(env: EnvSettings) -> str:
             parts.append("kinds " + ",".join(env.kinds))
     if env.random_start:
         parts.append(f"random starts {env.random_start:g}")
+    if env.object_start:
+        parts.append(f"starts around an object {env.object_start:g}")
     return ", ".join(parts)
 
 
@@ -295,9 +297,9 @@ def evaluate_command(
         first = 0 if seed is None else seed
         try:
             env_settings = EnvSettings(**changes)
+            env = LanroEnv(task_name, env_settings, render_mode="rgb_array" if gif else None)
         except ValueError as error:
             raise fail(f"{error} (see 'lanro eval --help')") from None
-        env = LanroEnv(task_name, env_settings, render_mode="rgb_array" if gif else None)
         try:
             report = evaluate(env, make_policy(what, task_name), episodes or 100, first, gif)
         finally:

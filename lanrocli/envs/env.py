@@ -14,7 +14,16 @@ from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.tasks import TaskView, make_task
 from lanrocli.language import COLOURS, SHAPES, grammar_vocabulary
 from lanrocli.reward import reward
-from lanrocli.sim import OBJECT_AREA, SHAPES as SIM_SHAPES, WORKSPACE, ObjectSet, Panda, World, resting_position
+from lanrocli.sim import (
+    MAX_FINGER_WIDTH,
+    OBJECT_AREA,
+    SHAPES as SIM_SHAPES,
+    WORKSPACE,
+    ObjectSet,
+    Panda,
+    World,
+    resting_position,
+)
 
 ARM_SIZE = 7
 """End-effector position (3), its linear velocity (3), finger width (1)."""
@@ -75,7 +84,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     lift the reward is therefore not a function of the observation alone.
 
     Episodes start with the end effector at (0, 0, 0.10); ``random_start`` is the share that starts at a
-    random point of the workspace near the table instead, clear of the objects (for training).
+    random point of the workspace near the table instead, clear of the objects, and ``object_start`` (grasp
+    and lift) the share that starts with the open hand around a random object (both for training).
 
     ``instruction`` is the current goal sentence (instruction, plus the correction from the step it is
     spoken) in the grammar-wide vocabulary, padded with 0. Reward is 0 when the task holds for the goal
@@ -108,6 +118,11 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.settings = settings
         self.task = make_task(task)
+        if settings.object_start > 0.0 and not self.task.gripper:
+            raise ValueError(
+                f"object_start needs a task with a gripper (grasp or lift): {task}'s fingers stay closed, "
+                "so there is no hand to open around an object; leave object_start at 0"
+            )
         self.n_objects = objects = settings.objects
         self.object_slots = slots
         self.render_mode = render_mode
@@ -177,13 +192,20 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         return self._observation(), self._info()
 
     def _reset_arm(self, rng: np.random.Generator) -> None:
-        """The neutral pose, or with probability ``random_start`` a random point clear of the objects.
+        """The neutral pose, or with probability ``object_start`` the open hand around an object, or with
+        probability ``random_start`` a random point clear of the objects.
 
         A correction leaves the hand low beside the wrong object, a state the neutral start (10 cm up, in
-        the middle) seldom leads to; random starts near the table make it common in training.
+        the middle) seldom leads to; random starts near the table make it common in training. A random arm
+        almost never holds an object, so hindsight has no grasp to relabel (``benchmarks/exploration.py``);
+        from around an object, closing and raising the hand is a matter of a few lucky steps.
         """
-        width = 0.08 if self.task.gripper else 0.0
-        if self.settings.random_start > 0.0 and rng.random() < self.settings.random_start:
+        width = MAX_FINGER_WIDTH if self.task.gripper else 0.0
+        shares = self.settings.object_start, self.settings.random_start
+        draw = rng.random() if any(shares) else 1.0
+        if draw < shares[0] and self._start_around_object(rng):
+            return
+        if shares[0] <= draw < sum(shares):
             low = (*WORKSPACE.low[:2], START_HEIGHT[0])
             high = (*WORKSPACE.high[:2], START_HEIGHT[1])
             for _ in range(START_TRIES):
@@ -191,6 +213,14 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 if self.robot.clear_of(self.objects.body_ids, START_CLEARANCE):
                     return
         self.robot.reset(width)
+
+    def _start_around_object(self, rng: np.random.Generator) -> bool:
+        """The open hand with a random object between its fingers, at the object's centre height (clipped to
+        the workspace); ``False`` where the fingers would cut into it (a cuboid turned across them)."""
+        target = int(rng.integers(self.n_objects))
+        position = self.objects.states().positions[target]
+        self.robot.reset(MAX_FINGER_WIDTH, ee_position=position)
+        return self.robot.clear_of(self.objects.body_ids, 0.0)
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         if self._scene is None:

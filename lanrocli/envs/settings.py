@@ -52,6 +52,13 @@ class EnvSettings:
             "objects, instead of the neutral pose (for training; evaluation starts from the neutral pose)."
         ),
     )
+    object_start: float = field(
+        default=0.0,
+        metadata=_help(
+            "Share of episodes that start with the open hand around a random object, at the height of its "
+            "centre (grasp and lift; for training, like random_start, which it adds to: the two sum to at most 1)."
+        ),
+    )
 
     def __post_init__(self) -> None:
         if isinstance(self.objects, bool) or self.objects not in (2, 3):
@@ -64,6 +71,11 @@ class EnvSettings:
             raise ValueError(f"max_episode_steps must be positive, got {self.max_episode_steps}")
         if not 0.0 <= self.random_start <= 1.0:
             raise ValueError(f"random_start must be a probability within [0, 1], got {self.random_start}")
+        if not 0.0 <= self.object_start <= 1.0 - self.random_start:
+            raise ValueError(
+                f"object_start must be within [0, 1 - random_start] = [0, {1.0 - self.random_start:g}] (the two "
+                f"shares split the episodes), got {self.object_start}"
+            )
         instructor = self.instructor  # the instructor checks its own settings, across fields too
         object.__setattr__(self, "kinds", None if self.kinds is None else instructor.kinds)
 
@@ -85,9 +97,9 @@ class EnvSettings:
         return CORRECTION_LIMIT if self.correction_rate > 0 else PLAIN_LIMIT
 
     def for_evaluation(self) -> EnvSettings:
-        """These settings as evaluation uses them: every episode starts from the neutral pose (random starts
-        are for training), so success is comparable across runs and curricula."""
-        return dataclasses.replace(self, random_start=0.0)
+        """These settings as evaluation uses them: every episode starts from the neutral pose (random and
+        object starts are for training), so success is comparable across runs and curricula."""
+        return dataclasses.replace(self, random_start=0.0, object_start=0.0)
 
     def replace(self, **changes: Any) -> EnvSettings:
         return dataclasses.replace(self, **changes)

@@ -47,7 +47,10 @@ class Task:
     """A task: whether the arm uses its gripper, per-episode parameters, and the condition C_T."""
 
     name: ClassVar[choices.Task]
-    gripper: ClassVar[bool] = False
+
+    @property
+    def gripper(self) -> bool:
+        return self.name.gripper
 
     @property
     def action_size(self) -> int:
@@ -103,7 +106,6 @@ def held(view: TaskView) -> np.ndarray:
 
 class Grasp(Task):
     name = choices.Task.GRASP
-    gripper = True
 
     def achieved(self, view: TaskView) -> np.ndarray:
         return held(view)
@@ -113,7 +115,6 @@ class Lift(Task):
     """Held, and raised above this episode's height."""
 
     name = choices.Task.LIFT
-    gripper = True
 
     def __init__(self) -> None:
         self.height = LIFT_HEIGHT[0]

@@ -217,6 +217,20 @@ class Curriculum(BaseModel):
             first[stage.name] = index
         return stages
 
+    @field_validator("stages")
+    @classmethod
+    def _object_starts_need_a_gripper(cls, stages: list[Stage], info: ValidationInfo) -> list[Stage]:
+        task = info.data.get("task")  # absent when the task itself failed validation
+        if task is None or task.gripper:
+            return stages
+        for index, stage in enumerate(stages):
+            if stage.env.object_start > 0:
+                raise ValueError(
+                    f"stages[{index}].env.object_start is {stage.env.object_start:g}, but it needs a task with a "
+                    f"gripper (grasp or lift): {task.value} keeps its fingers closed; remove the key"
+                )
+        return stages
+
     @property
     def max_objects(self) -> int:
         """The most objects any stage uses: the observation must have room for them from the start."""

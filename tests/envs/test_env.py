@@ -267,6 +267,51 @@ def test_random_start_share_is_respected_and_zero_changes_nothing() -> None:
         env.close()
 
 
+def test_object_starts_open_the_hand_around_an_object_without_touching_it() -> None:
+    env = LanroEnv("grasp", objects=3, mode="colour_shape", object_start=1.0)
+    chosen = set()
+    for seed in range(30):
+        obs, info = env.reset(seed=seed)
+        offsets = np.linalg.norm(info["object_positions"] - obs["observation"][:3], axis=1)
+        assert offsets.min() < 0.005, f"seed {seed}: the hand is {offsets.min():.3f} m from the nearest object"
+        chosen.add(int(offsets.argmin()))
+        assert obs["observation"][6] == pytest.approx(0.08, abs=1e-3)  # fingers open
+        assert not env.robot.contacts(env.objects.body_ids).robot.any(), f"seed {seed}: the fingers cut in"
+    assert chosen == {0, 1, 2}
+    env.close()
+
+
+def test_from_an_object_start_closing_and_raising_the_hand_grasps() -> None:
+    env = LanroEnv("grasp", objects=2, object_start=1.0)
+    for seed in range(3):
+        _, info = env.reset(seed=seed)
+        for _ in range(8):
+            _, _, _, _, info = env.step(np.array([0.0, 0.0, 0.0, -1.0]))
+        for _ in range(2):
+            _, _, _, _, info = env.step(np.array([0.0, 0.0, 1.0, -1.0]))
+        assert info["achieved"].any(), f"seed {seed}: closing and raising the hand held nothing"
+    env.close()
+
+
+def test_start_shares_split_the_episodes_and_need_a_gripper() -> None:
+    env = LanroEnv("lift", object_start=0.3, random_start=0.3)
+    kinds = []
+    for seed in range(90):
+        obs, info = env.reset(seed=seed)
+        ee = obs["observation"][:3]
+        if np.allclose(ee, (0, 0, 0.10), atol=2e-3):
+            kinds.append("neutral")
+        elif np.linalg.norm(info["object_positions"] - ee, axis=1).min() < 0.005:
+            kinds.append("object")
+        else:
+            kinds.append("random")
+    for kind in ("neutral", "object", "random"):
+        assert 15 <= kinds.count(kind) <= 45, (kind, kinds.count(kind))
+    env.close()
+    with pytest.raises(ValueError, match="object_start needs a task with a gripper"):
+        LanroEnv("push", object_start=0.5)
+
+
 def test_an_object_falling_off_the_table_truncates_the_episode() -> None:
     env = LanroEnv("push", objects=2)
     env.reset(seed=0)

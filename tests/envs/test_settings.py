@@ -23,6 +23,8 @@ from lanrocli.envs.settings import CORRECTION_LIMIT, PLAIN_LIMIT, EnvSettings
         ({"kinds": ("ambiguity", "ambiguity")}, "kinds"),
         ({"max_episode_steps": 0}, "max_episode_steps"),
         ({"random_start": 1.5}, "random_start"),
+        ({"object_start": -0.5}, "object_start"),
+        ({"object_start": 0.6, "random_start": 0.5}, "object_start"),
     ],
 )
 def test_each_bad_setting_is_named(changes: dict, setting: str) -> None:
@@ -57,5 +59,5 @@ def test_episode_limit_and_evaluation_view() -> None:
     assert EnvSettings().episode_limit == PLAIN_LIMIT
     assert EnvSettings(correction_rate=0.5).episode_limit == CORRECTION_LIMIT
     assert EnvSettings(correction_rate=0.5, max_episode_steps=30).episode_limit == 30
-    training = EnvSettings(objects=3, random_start=0.5)
+    training = EnvSettings(objects=3, random_start=0.5, object_start=0.25)
     assert training.for_evaluation() == EnvSettings(objects=3)

@@ -78,6 +78,7 @@ def test_env_section_is_the_environments_settings() -> None:
         "kinds": ["ambiguity"],
         "max_episode_steps": None,
         "random_start": 0.0,
+        "object_start": 0.0,
     }
     assert list(EnvConfig.model_fields) == [f.name for f in dataclasses.fields(EnvSettings)]
 
@@ -127,6 +128,14 @@ def test_random_start_is_a_share_of_episodes(tmp_path: Path) -> None:
     assert "within [0, 1], got 2" in problem.message
     stage = load_curriculum(write(tmp_path, "ok.yaml", MINIMAL + "    env: {random_start: 0.5}\n")).stages[0]
     assert stage.env.settings().random_start == 0.5
+
+
+def test_object_starts_need_a_gripper_task(tmp_path: Path) -> None:
+    problem = only_problem(write(tmp_path, "c.yaml", MINIMAL + "    env: {object_start: 0.5}\n"))
+    assert (problem.line, problem.path) == (3, "stages")
+    assert problem.message.startswith("stages[0].env.object_start is 0.5, but it needs a task with a gripper")
+    grasp = MINIMAL.replace("task: push", "task: grasp") + "    env: {object_start: 0.5, random_start: 0.5}\n"
+    assert load_curriculum(write(tmp_path, "ok.yaml", grasp)).stages[0].env.settings().object_start == 0.5
 
 
 def test_empty_stage_list(tmp_path: Path) -> None:
