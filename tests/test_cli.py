@@ -118,7 +118,7 @@ def test_eval_table_and_bad_values() -> None:
     bad = runner.invoke(app, ["eval", "oracle", "--instruction", "blank"])
     assert bad.exit_code == 2 and "scripted policies read no sentence" in bad.output
     bad = runner.invoke(app, ["eval", "oracle", "--task", "push", "--object-start", "0.5"])
-    assert bad.exit_code == 2 and "object_start needs a task with a gripper" in bad.output
+    assert bad.exit_code == 2 and "object_start is 0.5, but it needs a task with a gripper" in bad.output
 
 
 def test_eval_writes_a_gif(tmp_path) -> None:

@@ -118,11 +118,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         self.settings = settings
         self.task = make_task(task)
-        if settings.object_start > 0.0 and not self.task.gripper:
-            raise ValueError(
-                f"object_start needs a task with a gripper (grasp or lift): {task}'s fingers stay closed, "
-                "so there is no hand to open around an object; leave object_start at 0"
-            )
+        settings.check_task(self.task.name)
         self.n_objects = objects = settings.objects
         self.object_slots = slots
         self.render_mode = render_mode
@@ -200,7 +196,6 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         almost never holds an object, so hindsight has no grasp to relabel (``benchmarks/exploration.py``);
         from around an object, closing and raising the hand is a matter of a few lucky steps.
         """
-        width = MAX_FINGER_WIDTH if self.task.gripper else 0.0
         shares = self.settings.object_start, self.settings.random_start
         draw = rng.random() if any(shares) else 1.0
         if draw < shares[0] and self._start_around_object(rng):
@@ -209,10 +204,10 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             low = (*WORKSPACE.low[:2], START_HEIGHT[0])
             high = (*WORKSPACE.high[:2], START_HEIGHT[1])
             for _ in range(START_TRIES):
-                self.robot.reset(width, ee_position=rng.uniform(low, high))
+                self.robot.reset(MAX_FINGER_WIDTH, ee_position=rng.uniform(low, high))
                 if self.robot.clear_of(self.objects.body_ids, START_CLEARANCE):
                     return
-        self.robot.reset(width)
+        self.robot.reset(MAX_FINGER_WIDTH)  # open, where the arm has fingers to open
 
     def _start_around_object(self, rng: np.random.Generator) -> bool:
         """The open hand with a random object between its fingers, at the object's centre height (clipped to

@@ -12,7 +12,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-from lanrocli.choices import Kind, Mode
+from lanrocli.choices import Kind, Mode, Task
 from lanrocli.envs.instructor import InstructorSettings
 
 PLAIN_LIMIT = 50
@@ -100,6 +100,14 @@ class EnvSettings:
         """These settings as evaluation uses them: every episode starts from the neutral pose (random and
         object starts are for training), so success is comparable across runs and curricula."""
         return dataclasses.replace(self, random_start=0.0, object_start=0.0)
+
+    def check_task(self, task: Task) -> None:
+        """The settings that only some tasks accept: object starts need a gripper to open."""
+        if self.object_start > 0.0 and not task.gripper:
+            raise ValueError(
+                f"object_start is {self.object_start:g}, but it needs a task with a gripper (grasp or lift): "
+                f"{task.value} keeps its fingers closed; leave object_start at 0"
+            )
 
     def replace(self, **changes: Any) -> EnvSettings:
         return dataclasses.replace(self, **changes)

@@ -219,16 +219,15 @@ class Curriculum(BaseModel):
 
     @field_validator("stages")
     @classmethod
-    def _object_starts_need_a_gripper(cls, stages: list[Stage], info: ValidationInfo) -> list[Stage]:
+    def _settings_fit_the_task(cls, stages: list[Stage], info: ValidationInfo) -> list[Stage]:
         task = info.data.get("task")  # absent when the task itself failed validation
-        if task is None or task.gripper:
+        if task is None:
             return stages
         for index, stage in enumerate(stages):
-            if stage.env.object_start > 0:
-                raise ValueError(
-                    f"stages[{index}].env.object_start is {stage.env.object_start:g}, but it needs a task with a "
-                    f"gripper (grasp or lift): {task.value} keeps its fingers closed; remove the key"
-                )
+            try:
+                stage.env.settings().check_task(task)
+            except ValueError as error:
+                raise ValueError(f"stages[{index}].env: {error}") from None
         return stages
 
     @property

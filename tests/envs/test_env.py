@@ -308,7 +308,7 @@ def test_start_shares_split_the_episodes_and_need_a_gripper() -> None:
     for kind in ("neutral", "object", "random"):
         assert 15 <= kinds.count(kind) <= 45, (kind, kinds.count(kind))
     env.close()
-    with pytest.raises(ValueError, match="object_start needs a task with a gripper"):
+    with pytest.raises(ValueError, match="object_start is 0.5, but it needs a task with a gripper"):
         LanroEnv("push", object_start=0.5)
 
 

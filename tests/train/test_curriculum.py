@@ -133,7 +133,7 @@ def test_random_start_is_a_share_of_episodes(tmp_path: Path) -> None:
 def test_object_starts_need_a_gripper_task(tmp_path: Path) -> None:
     problem = only_problem(write(tmp_path, "c.yaml", MINIMAL + "    env: {object_start: 0.5}\n"))
     assert (problem.line, problem.path) == (3, "stages")
-    assert problem.message.startswith("stages[0].env.object_start is 0.5, but it needs a task with a gripper")
+    assert problem.message.startswith("stages[0].env: object_start is 0.5, but it needs a task with a gripper")
     grasp = MINIMAL.replace("task: push", "task: grasp") + "    env: {object_start: 0.5, random_start: 0.5}\n"
     assert load_curriculum(write(tmp_path, "ok.yaml", grasp)).stages[0].env.settings().object_start == 0.5
 
