@@ -1,4 +1,4 @@
-"""The named choices every layer shares: tasks, scene modes, kinds of correction, the sentence shown.
+"""The named choices every layer shares: tasks, scene modes, kinds and forms of correction, the sentence shown.
 
 One enum each, read alike by the environment, the curriculum schema (pydantic), the command line (typer)
 and the reports, so a new value is added here once. Each is a ``StrEnum``: its members are their values as
@@ -56,6 +56,16 @@ class Kind(StrEnum):
     COMMON_GROUND = "common_ground"
     INSTRUCTION_CORRECTION = "instruction_correction"
     WRONG_OBJECT = "wrong_object"
+
+
+class CorrectionForm(StrEnum):
+    """How a correction begins, which decides how it changes the goal: an excuse ("sorry the ...", "no i
+    meant the ...") and an edit ("actually the ...") name the goal; a negation ("not the ...") rules out
+    the object the arm acted on and leaves the goal as the one candidate. The order is the instructor's."""
+
+    EXCUSE = "excuse"
+    NEGATION = "negation"
+    EDIT = "edit"
 
 
 class Instruction(StrEnum):

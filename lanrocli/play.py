@@ -41,7 +41,7 @@ import pybullet
 from rich.console import Console
 from rich.markup import escape
 
-from lanrocli.choices import Task
+from lanrocli.choices import CorrectionForm, Task
 from lanrocli.envs.caption import caption
 from lanrocli.envs.env import FALLEN, IMAGE_SIZE, LanroEnv
 from lanrocli.envs.evaluation import save_gif
@@ -53,7 +53,6 @@ from lanrocli.language import (
     RARE_COLOUR_WORDS,
     SHAPE_WORDS,
     TASK_VERBS,
-    Beginning,
     ObjectProps,
     Vocabulary,
     all_corrections,
@@ -72,7 +71,7 @@ COLOUR_OF_WORD: Mapping[str, str] = {**{c: c for c in COLOURS}, **{w: c for c, w
 SHAPE_OF_WORD: Mapping[str, str] = {w: shape for shape, words in SHAPE_WORDS.items() for w in words}
 """Every word that names a shape, to the shape it names."""
 
-NEGATION = BEGINNING_WORDS[Beginning.NEGATION][0]
+NEGATION = BEGINNING_WORDS[CorrectionForm.NEGATION][0]
 
 WORD = re.compile(r"[\w']+")
 

@@ -14,7 +14,7 @@ Sampling then needs only vectorised indexing.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,7 +27,11 @@ from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 NO_OBJECT = np.iinfo(np.uint8).max
 """Property index stored for an object slot that the episode's scene leaves empty."""
 
-_FORMAT = 1
+NEVER = np.iinfo(np.int32).max
+"""``first_achieved`` of an object the episode never achieved the task on."""
+
+_FORMAT = 2
+"""1: corrected sentences by target only, and no ``names_goal`` or ``first_achieved``; still read."""
 
 
 @dataclass
@@ -52,6 +56,9 @@ class EpisodeData:
     goal_index: int
     objects: tuple[ObjectProps, ...]
     task: str
+    correction_episode: bool = False
+    """Whether the instructor set this episode up for a correction: its instruction singles out the goal
+    only once the correction is spoken (the environment's ``info["challenge"]`` is not None)."""
 
     def __len__(self) -> int:
         return int(self.observations.shape[0])
@@ -60,8 +67,10 @@ class EpisodeData:
 @dataclass
 class Batch:
     """Sampled transitions. ``done``: the step ended by success. ``named``: for a relabelled transition the
-    object slot its new sentence singles out, -1 for the others. ``slots``: where in the buffer each
-    transition is stored, to look up what the batch does not carry.
+    object slot its new sentence singles out, -1 for the others. ``label``: the object slot the
+    transition's sentence singles out where that is known (``named``, and with ``ground_real`` sampling
+    the goal of a stored transition whose sentence names it), -1 elsewhere; the attention is taught on
+    it. ``slots``: where in the buffer each transition is stored, to look up what the batch does not carry.
 
     ``steps``: how many stored steps each transition spans. With n-step sampling ``reward`` is the return
     discounted over those steps, ``next_obs`` and ``next_instruction`` are read after the last of them, and
@@ -75,6 +84,7 @@ class Batch:
     next_instruction: np.ndarray  # int64 [B, L]
     done: np.ndarray  # bool [B]
     named: np.ndarray  # int64 [B]
+    label: np.ndarray  # int64 [B]
     slots: np.ndarray  # int64 [B]
     steps: np.ndarray  # int64 [B], 1 for one-step transitions
 
@@ -95,6 +105,8 @@ def _layout(obs_dim: int, action_dim: int, max_objects: int, length: int) -> dic
         "instruction": (np.uint8, (length,)),
         "next_instruction": (np.uint8, (length,)),
         "achieved": (np.bool_, (max_objects,)),
+        "names_goal": (np.bool_, ()),  # the sentence read with obs singles out the goal
+        "first_achieved": (np.int32, (max_objects,)),  # the episode's first step achieving each object
         "goal_index": (np.uint8, ()),
         "objects": (np.uint8, (max_objects, 2)),
         "task": (np.uint8, ()),
@@ -107,7 +119,7 @@ def _layout(obs_dim: int, action_dim: int, max_objects: int, length: int) -> dic
         "future_count": (np.int32, ()),
         "identifiable": (np.bool_, (max_objects,)),
         "plain_pool": (np.uint8, (max_objects, length)),
-        "corrected_pool": (np.uint8, (max_objects, length)),
+        "corrected_pool": (np.uint8, (max_objects, max_objects, length)),  # by target, touched object
         "valid": (np.bool_, ()),
     }
 
@@ -192,6 +204,11 @@ class ReplayBuffer:
         d["next_instruction"][lo:hi] = episode.next_instructions
         d["achieved"][lo:hi] = False
         d["achieved"][lo:hi, :n] = episode.achieved
+        corrected_yet = (episode.instructions != episode.instructions[0]).any(axis=1)
+        d["names_goal"][lo:hi] = corrected_yet | (not episode.correction_episode)
+        ever = episode.achieved.any(axis=0)
+        d["first_achieved"][lo:hi] = NEVER
+        d["first_achieved"][lo:hi, :n] = np.where(ever, np.argmax(episode.achieved, axis=0), NEVER)
         d["goal_index"][lo:hi] = episode.goal_index
         d["objects"][lo:hi] = NO_OBJECT
         d["objects"][lo:hi, :n] = [o.indices for o in objects]
@@ -206,7 +223,7 @@ class ReplayBuffer:
         d["plain_pool"][lo:hi] = 0
         d["corrected_pool"][lo:hi] = 0
         d["plain_pool"][lo : lo + rows, :n] = pool.plain
-        d["corrected_pool"][lo : lo + rows, :n] = pool.corrected
+        d["corrected_pool"][lo : lo + rows, :n, :n] = pool.corrected
 
         achieving = np.flatnonzero((episode.achieved & pool.identifiable).any(axis=1))
         first = np.searchsorted(achieving, np.arange(steps))
@@ -269,6 +286,8 @@ class ReplayBuffer:
         hindsight_share: float = 0.0,
         n_step: int = 1,
         gamma: float = 1.0,
+        fresh_targets: bool = False,
+        ground_real: bool = False,
     ) -> Batch:
         """``batch_size`` transitions drawn with replacement: a share ``hindsight_share`` (binomially) from
         the transitions whose episode achieves the task on an identifiable object at that step or later, the
@@ -277,8 +296,16 @@ class ReplayBuffer:
         With probability ``relabel_ratio`` a transition whose episode later achieves the task on an
         identifiable object gets a sentence for such an object: a step t' is drawn uniformly among the
         steps at or after t that achieved the task on one, then one of those objects uniformly. Its reward
-        and done flag are recomputed from the stored ``achieved`` flags at step t. A share
-        ``correction_share`` of the relabelled sentences are corrections rather than plain instructions.
+        and done flag are recomputed from the stored ``achieved`` flags at step t. With ``fresh_targets``
+        only objects the task did not already hold for before step t are targets (a target that holds
+        already makes a transition that is won whatever the action); a transition left without one keeps
+        its own sentence. A share ``correction_share`` of the relabelled sentences are corrections rather
+        than plain instructions: those written for the object the arm acted on first in the episode,
+        other than the target (where there is none, another object drawn uniformly).
+
+        ``ground_real``: a stored transition whose sentence singles out its goal (every step of a plain
+        episode, and the steps after the correction of a correction episode) is labelled with the goal
+        for the attention loss; one whose correction is still pending never is.
 
         With ``n_step`` above 1 each transition spans up to ``n_step`` stored steps of its episode (fewer where
         the episode ends first, or where its goal, the relabelled one included, is achieved first): see
@@ -302,11 +329,19 @@ class ReplayBuffer:
         if rows.size:
             step = d["achieving_slot"][d["future_first"][rows] + rng.integers(0, d["future_count"][rows])]
             candidates = d["achieved"][step] & d["identifiable"][step]
+            if fresh_targets:
+                at_start = d["episode_start"][rows] == rows
+                candidates &= ~(d["achieved"][np.maximum(rows - 1, 0)] & ~at_start[:, None])
+            found = candidates.any(axis=1)
+            relabel[relabel] = found
+            rows, candidates = rows[found], candidates[found]
+        if rows.size:
             target = np.argmax(np.where(candidates, rng.random(candidates.shape), -1.0), axis=1)
             pool_row = d["episode_start"][rows] + rng.integers(0, np.minimum(d["episode_length"][rows], self.pool_rows))
-            corrected = rng.random(rows.size) < correction_share
+            touched, has_other = self._touched(rows, target, rng)
+            corrected = (rng.random(rows.size) < correction_share) & has_other
             sentence = np.where(
-                corrected[:, None], d["corrected_pool"][pool_row, target], d["plain_pool"][pool_row, target]
+                corrected[:, None], d["corrected_pool"][pool_row, target, touched], d["plain_pool"][pool_row, target]
             )
             success = d["achieved"][rows, target]
             instruction[relabel] = sentence
@@ -314,6 +349,10 @@ class ReplayBuffer:
             reward[relabel] = np.where(success, SUCCESS_REWARD, FAILURE_REWARD)
             done[relabel] = success
             named[relabel] = target
+        label = named.copy()
+        if ground_real:
+            real = ~relabel & d["names_goal"][idx]
+            label[real] = d["goal_index"][idx[real]]
 
         batch = Batch(
             obs=d["obs"][idx],
@@ -324,12 +363,24 @@ class ReplayBuffer:
             next_instruction=next_instruction,
             done=done,
             named=named,
+            label=label,
             slots=idx,
             steps=np.ones(batch_size, dtype=np.int64),
         )
         if n_step > 1:
             self._extend(batch, relabel, target, n_step, gamma)
         return batch
+
+    def _touched(self, rows: np.ndarray, target: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Per relabelled transition, the object other than its target that the arm achieved the task on
+        first in the episode, else a uniformly drawn other object; and whether the scene has another."""
+        first = self.data["first_achieved"][rows].copy()
+        first[np.arange(rows.size), target] = NEVER
+        present = self.data["objects"][rows, :, 0] != NO_OBJECT
+        n = present.sum(axis=1)
+        drawn = (target + 1 + rng.integers(0, np.maximum(n - 1, 1))) % np.maximum(n, 1)
+        touched = np.where(first.min(axis=1) < NEVER, np.argmin(first, axis=1), drawn)
+        return touched, n > 1
 
     def _extend(self, batch: Batch, relabel: np.ndarray, target: np.ndarray, n_step: int, gamma: float) -> None:
         """Turn one-step transitions into n-step ones, in place.
@@ -412,7 +463,7 @@ class ReplayBuffer:
     def from_state(cls, meta: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> ReplayBuffer:
         """The buffer that :meth:`state` described. ``arrays`` may hold more than the buffer's arrays, and
         may be an open ``np.load`` archive, which then reads each array only as it is copied in."""
-        if meta["format"] != _FORMAT:
+        if meta["format"] not in (1, _FORMAT):
             raise ValueError(f"replay buffer file format {meta['format']} is not {_FORMAT}")
         buffer = cls(
             capacity=meta["capacity"],
@@ -425,10 +476,27 @@ class ReplayBuffer:
         )
         high = meta["high"]
         for name, array in buffer.data.items():
-            array[:high] = arrays[name]
+            if meta["format"] == 1 and name in _ADDED_IN_2:
+                _ADDED_IN_2[name](array[:high], arrays)
+            else:
+                array[:high] = arrays[name]
         buffer.rng.bit_generator.state = meta["rng"]
         buffer.position = meta["position"]
         buffer.high = high
         buffer.size = meta["size"]
         buffer.episodes_added = meta["episodes_added"]
         return buffer
+
+
+def _read_pool_of_format_1(array: np.ndarray, arrays: Mapping[str, np.ndarray]) -> None:
+    """Format 1 drew one corrected sentence per target: it serves every touched object."""
+    array[:] = np.asarray(arrays["corrected_pool"])[:, :, None, :]
+
+
+_ADDED_IN_2: dict[str, Callable[[np.ndarray, Mapping[str, np.ndarray]], None]] = {
+    "corrected_pool": _read_pool_of_format_1,
+    # What format 1 did not record reads as not known: no real transition is labelled for the attention,
+    # and relabelled corrections draw the touched object uniformly.
+    "names_goal": lambda array, _: array.fill(False),
+    "first_achieved": lambda array, _: array.fill(NEVER),
+}

@@ -198,7 +198,8 @@ class Actor(nn.Module):
 
     ``encoder`` is ``None`` when the actor reads the critic's sentence summary instead of its own. With a
     ``layout`` the observation is read object by object (see the module's docstring), and ``present``
-    must be given to every call.
+    must be given to every call; without ``sentence_in_trunk`` the sentence then acts through the
+    attention alone (:attr:`SACSettings.sentence_in_trunk`).
     """
 
     def __init__(
@@ -213,12 +214,14 @@ class Actor(nn.Module):
         log_std_min: float,
         log_std_max: float,
         layout: ObjectLayout | None = None,
+        sentence_in_trunk: bool = True,
     ) -> None:
         super().__init__()
         self.encoder = encoder
         self.reader = None if layout is None else SceneReader(1, layout, language_size, obs_size)
         self.obs_layer = nn.Linear(obs_dim if self.reader is None else self.reader.output_size, obs_size)
-        body_input = obs_size + language_size
+        self.sentence_in_trunk = sentence_in_trunk
+        body_input = obs_size + (language_size if sentence_in_trunk else 0)
         self.body = _mlp(body_input, hidden_size, depth)
         body_size = hidden_size if depth > 0 else body_input
         self.mean = nn.Linear(body_size, action_dim)
@@ -237,7 +240,8 @@ class Actor(nn.Module):
         reader's attention logits for these arguments, when the caller has them already."""
         if self.reader is not None:
             obs = self.reader(obs, language, present, scores)[0]
-        h = self.body(torch.cat([F.relu(self.obs_layer(obs)), language], dim=1))
+        observed = F.relu(self.obs_layer(obs))
+        h = self.body(torch.cat([observed, language], dim=1) if self.sentence_in_trunk else observed)
         log_std = self.log_std(h).clamp(self.log_std_min, self.log_std_max)
         return self.mean(h), log_std
 
@@ -288,13 +292,15 @@ class Critic(nn.Module):
         depth: int,
         n_critics: int,
         layout: ObjectLayout | None = None,
+        sentence_in_trunk: bool = True,
     ) -> None:
         super().__init__()
         self.encoder = encoder
         self.reader = None if layout is None else SceneReader(n_critics, layout, encoder.output_size, obs_size)
         obs_input = obs_dim if self.reader is None else self.reader.output_size
         self.obs_layer = EnsembleLinear(n_critics, obs_input, obs_size)
-        input_size = obs_size + encoder.output_size + action_dim
+        self.sentence_in_trunk = sentence_in_trunk
+        input_size = obs_size + (encoder.output_size if sentence_in_trunk else 0) + action_dim
         layers: list[nn.Module] = []
         for _ in range(depth):
             layers += [EnsembleLinear(n_critics, input_size, hidden_size), nn.ReLU()]
@@ -329,7 +335,7 @@ class Critic(nn.Module):
             obs = self.reader(obs, language, present, scores)
         observed = F.relu(self.obs_layer(obs))
         first = self._first_layer()
-        state = torch.cat([observed, language.expand(self.n_critics, -1, -1)], dim=2)
+        state = torch.cat([observed, language.expand(self.n_critics, -1, -1)], dim=2) if self.sentence_in_trunk else observed
         return torch.baddbmm(first.bias, state, first.weight[:, : -self.action_dim])
 
     def value(self, observed: torch.Tensor, action: torch.Tensor) -> torch.Tensor:

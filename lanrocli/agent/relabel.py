@@ -2,19 +2,19 @@
 
 When the arm did the task on some object, the episode is a success for a sentence that names that object,
 whatever the instructor had asked. The replay buffer turns failed episodes into such successes; this module
-writes the sentences. They come from the instructor's grammar and must be unambiguous in the scene, else the
-relabelled reward would teach the agent that an ambiguous sentence means one particular object.
-
-Two styles, both resolving to the target object:
+writes the sentences. They must be unambiguous in the scene, else the relabelled reward would teach the
+agent that an ambiguous sentence means one particular object. Two styles:
 
 - plain: ``<verb> the <phrase>`` where the phrase fits the target and no other object;
-- corrected: an instruction that does not by itself pick the target (another object's phrase, an ambiguous
-  phrase, or a rare colour word the agent may not know) followed by an excuse or edit that identifies the
-  target (``push the cube sorry the red cube``), or a negation that rules out the one other object the
-  instruction left open (``push the cube not the blue box``).
+- corrected: what the instructor would have said had the target been its goal and had the arm first acted
+  on another object (the *touched* one): the opening instruction of one of the episode kinds the scene
+  allows, then an excuse, an edit or a negation of the touched object, chosen by the instructor's own rule
+  (:mod:`lanrocli.language.dialogue`). So every form the instructor speaks is relabelled, the negation of
+  an object the instruction named ("push the red cube not the red cube": an instruction correction) and of
+  one it never named ("push the blue cube not the red cube": the arm's own mistake) included.
 
-The buffer draws a few of each per object when an episode is added, so that relabelling at sample time is
-only array indexing.
+The buffer draws a few of each per object (and, for corrections, per touched object) when an episode is
+added, so that relabelling at sample time is only array indexing.
 """
 
 from __future__ import annotations
@@ -24,76 +24,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lanrocli.choices import CorrectionForm, Kind
 from lanrocli.language import (
     BEGINNING_WORDS,
+    NAMING_FORMS,
     TASK_VERBS,
-    Beginning,
     ObjectProps,
     Phrase,
     Vocabulary,
     correction,
+    correction_forms,
     extend,
     identifying_phrases,
     instruction,
-    object_phrases,
 )
+from lanrocli.language.dialogue import candidates, naming_phrases, negation_phrases, opening_phrases
 
-CORRECTING_BEGINNINGS: tuple[Beginning, ...] = (Beginning.EXCUSE, Beginning.EDIT)
-"""Beginnings whose correction replaces the instruction's object by the one it names."""
-
-_DRAWS_PER_SENTENCE = 5
-"""Uniform numbers a sentence's choices need at most (verb, kind, beginning, two phrases), drawn at once."""
-
-
-@dataclass(frozen=True)
-class TargetPhrases:
-    """What the instructor could say to single out one object of a scene.
-
-    ``identifying``: phrases (common words) that fit the target and nothing else.
-    ``misleading``: instruction phrases a correction could follow: another object's, one that fits
-    several objects, or one with a rare colour word the listener may not know.
-    ``negations``: (instruction phrase, negated phrase) pairs: the instruction fits the target and, for a
-    listener who knows only the common words, also the negated object; the negated phrase identifies that
-    object, and removing it leaves the target alone, whether or not the listener knows the rare words.
-    """
-
-    identifying: tuple[Phrase, ...]
-    misleading: tuple[Phrase, ...]
-    negations: tuple[tuple[Phrase, Phrase], ...]
-
-
-def target_phrases(objects: Sequence[ObjectProps], target: int) -> TargetPhrases:
-    """The phrases that single out ``objects[target]`` among ``objects``."""
-    goal = objects[target]
-    others = [o for i, o in enumerate(objects) if i != target]
-    identifying = tuple(identifying_phrases(goal, others))
-    common_ids = {p.words for p in identifying}
-    seen: set[str] = set()
-    misleading: list[Phrase] = []
-    for obj in objects:
-        for phrase in object_phrases(obj, rare=True):
-            if phrase.words not in common_ids and phrase.words not in seen:
-                seen.add(phrase.words)
-                misleading.append(phrase)
-    negations: list[tuple[Phrase, Phrase]] = []
-    for i, other in enumerate(objects):
-        if i == target:
-            continue
-        rest = [o for j, o in enumerate(objects) if j != i]
-        for negated in identifying_phrases(other, rest):
-            for phrase in object_phrases(goal, rare=True):
-                if not _fits_common(phrase, other):
-                    continue  # negating an object the instruction never pointed at corrects nothing
-                left = [o for o in objects if phrase.matches(o) and not negated.matches(o)]
-                left_common = [o for o in objects if _fits_common(phrase, o) and not negated.matches(o)]
-                if left == [goal] and left_common == [goal]:
-                    negations.append((phrase, negated))
-    return TargetPhrases(identifying, tuple(misleading), tuple(negations))
-
-
-def _fits_common(phrase: Phrase, obj: ObjectProps) -> bool:
-    """Does ``phrase`` fit ``obj`` for a listener who does not know rare words (a rare colour fits any)?"""
-    return phrase.shape in (None, obj.shape) and (phrase.rare or phrase.colour in (None, obj.colour))
+_DRAWS_PER_SENTENCE = 7
+"""Uniform numbers a sentence's choices need at most (verb, kind, named object, opening phrase, form,
+beginning words, correction phrase), drawn at once."""
 
 
 def _pick(items: Sequence, u: float):  # type: ignore[no-untyped-def]
@@ -101,37 +50,77 @@ def _pick(items: Sequence, u: float):  # type: ignore[no-untyped-def]
     return items[int(u * len(items))]
 
 
-def plain_sentence(verbs: Sequence[str], phrases: TargetPhrases, u: np.ndarray) -> str:
+@dataclass
+class _Scene:
+    """One scene's phrase lists, each computed once however many sentences are drawn from it."""
+
+    objects: Sequence[ObjectProps]
+
+    def __post_init__(self) -> None:
+        self._cache: dict[tuple, list[Phrase]] = {}
+
+    def identifying(self, target: int) -> list[Phrase]:
+        return self._get(("identifying", target), lambda: identifying_phrases(
+            self.objects[target], [o for i, o in enumerate(self.objects) if i != target]
+        ))
+
+    def openings(self, kind: Kind, target: int, named: int | None) -> list[Phrase]:
+        return self._get(("opening", kind, target, named), lambda: opening_phrases(kind, self.objects, target, named))
+
+    def negations(self, kind: Kind, phrase: Phrase, target: int, touched: int) -> list[Phrase]:
+        return self._get(("not", kind, phrase, target, touched), lambda: negation_phrases(
+            self.objects, target, touched, candidates(kind, phrase, self.objects)
+        ))
+
+    def naming(self, kind: Kind, phrase: Phrase, target: int) -> list[Phrase]:
+        return self._get(("name", kind, phrase, target), lambda: naming_phrases(
+            self.objects, target, candidates(kind, phrase, self.objects)
+        ))
+
+    def _get(self, key: tuple, compute) -> list[Phrase]:  # type: ignore[no-untyped-def]
+        if key not in self._cache:
+            self._cache[key] = compute()
+        return self._cache[key]
+
+
+def plain_sentence(verbs: Sequence[str], scene: _Scene, target: int, u: np.ndarray) -> str:
     """``<verb> the <identifying phrase>``, chosen by the uniform draws ``u[0]`` and ``u[1]``."""
-    return instruction(_pick(verbs, u[0]), _pick(phrases.identifying, u[1]))
+    return instruction(_pick(verbs, u[0]), _pick(scene.identifying(target), u[1]))
 
 
-def corrected_sentence(verbs: Sequence[str], phrases: TargetPhrases, negations: bool, u: np.ndarray) -> str:
-    """An instruction that misses the target, then a correction that fixes it, chosen by the draws ``u``.
-
-    There is always a misleading instruction to correct: every colour has a rare word.
-    """
-    kinds = list(CORRECTING_BEGINNINGS)
-    if negations and phrases.negations:
-        kinds.append(Beginning.NEGATION)
-    verb = _pick(verbs, u[0])
+def corrected_sentence(
+    verbs: Sequence[str], scene: _Scene, target: int, touched: int, negations: bool, u: np.ndarray
+) -> str:
+    """An opening instruction and the correction the instructor would speak after the arm acted on
+    ``touched``, chosen by the draws ``u``: the kind uniformly among those the scene allows, then as the
+    instructor chooses (a negation where one singles out the target, else an excuse or an edit)."""
+    others = [i for i in range(len(scene.objects)) if i != target and scene.identifying(i)]
+    kinds = [k for k in (Kind.AMBIGUITY, Kind.COMMON_GROUND) if scene.openings(k, target, None)]
+    kinds += [Kind.INSTRUCTION_CORRECTION] if others else []
+    kinds.append(Kind.WRONG_OBJECT)  # the target is identifiable, so this kind is always there
     kind = _pick(kinds, u[1])
-    beginning = _pick(BEGINNING_WORDS[kind], u[2])
-    if kind is Beginning.NEGATION:
-        phrase, negated = _pick(phrases.negations, u[3])
-        return extend(instruction(verb, phrase), correction(beginning, negated))
-    return extend(
-        instruction(verb, _pick(phrases.misleading, u[3])),
-        correction(beginning, _pick(phrases.identifying, u[4])),
-    )
+    named = _pick(others, u[2]) if kind is Kind.INSTRUCTION_CORRECTION else None
+    phrase = _pick(scene.openings(kind, target, named), u[3])
+    form = _pick(correction_forms(negations), u[4])
+    if form is CorrectionForm.NEGATION:
+        negated = scene.negations(kind, phrase, target, touched)
+        if negated:
+            text = correction(BEGINNING_WORDS[form][0], _pick(negated, u[6]))
+            return extend(instruction(_pick(verbs, u[0]), phrase), text)
+        form = _pick(NAMING_FORMS, u[5])
+    beginning = _pick(BEGINNING_WORDS[form], u[5])
+    text = correction(beginning, _pick(scene.naming(kind, phrase, target), u[6]))
+    return extend(instruction(_pick(verbs, u[0]), phrase), text)
 
 
 @dataclass(frozen=True)
 class SentencePool:
     """Relabelling sentences for one episode, as token ids.
 
-    ``plain`` and ``corrected``: uint8 [rows, n_objects, L]. ``identifiable``: bool [n_objects]; where it
-    is false (an object with an identical twin) no sentence can name the object and its rows are padding.
+    ``plain``: uint8 [rows, n_objects, L], by target. ``corrected``: uint8 [rows, n_objects, n_objects, L],
+    by target and touched object (padding where the two are one). ``identifiable``: bool [n_objects];
+    where it is false (an object with an identical twin) no sentence can name the object and its rows
+    are padding.
     """
 
     plain: np.ndarray
@@ -147,18 +136,19 @@ def sentence_pool(
     negations: bool,
     rng: np.random.Generator,
 ) -> SentencePool:
-    """``rows`` plain and ``rows`` corrected sentences for every identifiable object of the scene."""
+    """``rows`` plain sentences for every identifiable object of the scene, and ``rows`` corrected ones for
+    every pair of an identifiable target and another object the arm may have acted on first."""
     verbs = TASK_VERBS[task]
     n = len(objects)
+    scene = _Scene(objects)
     plain = np.zeros((rows, n, vocabulary.max_length), dtype=np.uint8)
-    corrected = np.zeros_like(plain)
-    identifiable = np.zeros(n, dtype=bool)
-    for k in range(n):
-        phrases = target_phrases(objects, k)
-        if not phrases.identifying:
-            continue
-        identifiable[k] = True
-        draws = rng.random((rows, 2, _DRAWS_PER_SENTENCE))
-        plain[:, k] = vocabulary.encode_many(plain_sentence(verbs, phrases, u[0]) for u in draws)
-        corrected[:, k] = vocabulary.encode_many(corrected_sentence(verbs, phrases, negations, u[1]) for u in draws)
+    corrected = np.zeros((rows, n, n, vocabulary.max_length), dtype=np.uint8)
+    identifiable = np.array([bool(scene.identifying(k)) for k in range(n)], dtype=bool)
+    for k in np.flatnonzero(identifiable):
+        draws = rng.random((rows, n, _DRAWS_PER_SENTENCE))
+        plain[:, k] = vocabulary.encode_many(plain_sentence(verbs, scene, k, u) for u in draws[:, k])
+        for j in range(n):
+            if j != k:
+                texts = (corrected_sentence(verbs, scene, k, j, negations, u) for u in draws[:, j])
+                corrected[:, k, j] = vocabulary.encode_many(texts)
     return SentencePool(plain, corrected, identifiable)

@@ -65,10 +65,11 @@ class SACAgent:
             actor_encoder = None if s.share_encoder else LanguageEncoder(vocab_size, s.embedding_size, s.language_size)
             self.actor = Actor(
                 obs_dim, action_dim, actor_encoder, s.language_size, s.obs_size, s.hidden_size, s.hidden_layers,
-                s.log_std_min, s.log_std_max, self.layout,
+                s.log_std_min, s.log_std_max, self.layout, s.sentence_in_trunk,
             ).to(self.device)
             self.critic = Critic(
-                obs_dim, action_dim, critic_encoder, s.obs_size, s.hidden_size, s.hidden_layers, s.critics, self.layout
+                obs_dim, action_dim, critic_encoder, s.obs_size, s.hidden_size, s.hidden_layers, s.critics, self.layout,
+                s.sentence_in_trunk,
             ).to(self.device)
         self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
         # The layout serves the normaliser whatever the architecture: objects share statistics across slots.
@@ -123,6 +124,18 @@ class SACAgent:
             action, _ = self.actor.sample(x, language, self.generator, present)
         out = action.cpu().numpy()
         return out[0] if single else out
+
+    @torch.no_grad()
+    def attention(self, obs: Mapping[str, np.ndarray]) -> np.ndarray | None:
+        """The actor's attention over the object slots, [B, slots] (or [slots] for one unbatched
+        observation), summing to 1 over the present objects; None for a flat agent, which has none."""
+        if self.actor.reader is None:
+            return None
+        observation = np.asarray(obs["observation"])
+        x, present = self._observe(observation)
+        tokens = self._tensor(obs["instruction"], torch.int64).reshape(x.shape[0], -1)
+        weights = self.actor.reader.scores(x, self.actor_encoder(tokens), present)[0].softmax(dim=-1).cpu().numpy()
+        return weights[0] if observation.ndim == 1 else weights
 
     def update_normalizer(self, observations: np.ndarray) -> None:
         """Add collected observations [n, N] to the normaliser's statistics (not relabelled samples)."""
@@ -210,12 +223,12 @@ class SACAgent:
         self, batch: Batch, critic_scores: torch.Tensor | None, actor_scores: torch.Tensor | None
     ) -> torch.Tensor:
         """Cross-entropy of the actor's and each critic's attention (logits [members, B, slots]) against the
-        object that a relabelled sentence names; zero without object-wise readers, a weight of 0 or
-        relabelled transitions."""
-        rows = torch.as_tensor(np.flatnonzero(batch.named >= 0), device=self.device)
+        object that a transition's sentence names (``batch.label``); zero without object-wise readers, a
+        weight of 0 or labelled transitions."""
+        rows = torch.as_tensor(np.flatnonzero(batch.label >= 0), device=self.device)
         if critic_scores is None or actor_scores is None or self.settings.grounding == 0.0 or rows.numel() == 0:
             return torch.zeros((), device=self.device)
-        named = self._tensor(batch.named, torch.int64)[rows]
+        named = self._tensor(batch.label, torch.int64)[rows]
         loss = torch.zeros((), device=self.device)
         for scores in (critic_scores, actor_scores):
             chosen = scores[:, rows]  # [members, rows, slots]

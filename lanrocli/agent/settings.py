@@ -53,6 +53,11 @@ class SACSettings:
     since it chose the sentence for that object). It teaches actor and critic which object a sentence
     names directly, rather than only through the small differences it makes to Bellman targets. 0 turns
     it off."""
+    sentence_in_trunk: bool = True
+    """Whether the layers that choose the action (and judge it) read the sentence summary beside the
+    observation. With ``architecture: objects`` and ``False`` the sentence acts through the attention
+    alone: it picks the object, and the motor layers see the arm and that object, so a negation or an
+    unfamiliar correction cannot disturb how the arm moves, only what it moves to."""
     share_encoder: bool = False
     """One sentence encoder for actor and critic, trained by the critic's loss only."""
     max_grad_norm: float | None = None
@@ -66,7 +71,7 @@ class SACSettings:
 
     ARCHITECTURE: ClassVar[tuple[str, ...]] = (
         "critics", "embedding_size", "language_size", "obs_size", "hidden_size", "hidden_layers", "architecture",
-        "share_encoder", "autotune_alpha",
+        "share_encoder", "autotune_alpha", "sentence_in_trunk",
     )
     """The settings that shape the networks and the optimiser's state: a saved agent loads only into one
     that agrees on them."""
@@ -80,6 +85,8 @@ class SACSettings:
             raise ValueError(f"alpha must be positive, got {self.alpha}")
         if not 0.0 <= self.polyak <= 1.0 or not 0.0 <= self.gamma <= 1.0:
             raise ValueError("gamma and polyak must lie in [0, 1]")
+        if not self.sentence_in_trunk and self.architecture != "objects":
+            raise ValueError("sentence_in_trunk: false needs architecture 'objects': a flat network reads the sentence only there")
         if self.grounding < 0.0:
             raise ValueError(f"grounding must not be negative, got {self.grounding}")
         if self.batch_size < 1 or self.hidden_layers < 0:
@@ -121,6 +128,16 @@ class BufferSettings:
     it: when random arms touched an object in 8% of reach episodes, mostly within a few steps, 1.5% of the
     stored transitions could be relabelled at all; uniform batches held half a success on average, and the
     critic valued the touching step itself at -13 instead of 0 after 130k steps."""
+    relabel_negations: bool = False
+    """Relabelled corrections may be negations in every stage, not only in those whose instructor speaks
+    them: an agent then meets "not the ..." from its first stage on."""
+    fresh_targets: bool = False
+    """Relabel only to objects the task did not already hold for before the step: a transition relabelled to
+    an object the arm had already pushed or was touching is won whatever its action, and teaches nothing."""
+    ground_real: bool = False
+    """Teach the attention on stored transitions too: wherever a transition's sentence singles out its
+    goal (every step of a plain episode, the steps after a spoken correction), the goal is its label. A
+    transition whose correction is still pending is never labelled."""
     n_step: int = 1
     """Bellman targets over this many stored steps (n-step returns), cut at the episode's end and at its
     goal's success: a sparse success reaches the states that led to it in 1/n of the updates. 1 is the
@@ -143,4 +160,6 @@ class BufferSettings:
             "correction_share": self.correction_share if self.relabel_corrections else 0.0,
             "hindsight_share": self.hindsight_share,
             "n_step": self.n_step,
+            "fresh_targets": self.fresh_targets,
+            "ground_real": self.ground_real,
         }

@@ -9,28 +9,24 @@ wrongly named object in an instruction correction episode does not end the episo
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from lanrocli.choices import Kind
+from lanrocli.choices import CorrectionForm, Kind
 from lanrocli.language import (
     BEGINNING_WORDS,
+    NAMING_FORMS,
     TASK_VERBS,
-    Beginning,
-    ObjectProps,
     Phrase,
-    ambiguous_phrases,
-    beginning_kinds,
     check_task,
     correction,
+    correction_forms,
     extend,
-    identifying_phrases,
     instruction,
-    object_phrases,
     pick,
 )
+from lanrocli.language.dialogue import candidates, naming_phrases, negation_phrases, opening_phrases
 from lanrocli.envs.scene import Scene
 
 MAX_DELAY = 20
@@ -46,6 +42,11 @@ class InstructorSettings:
     max_delay: int = 0
     rare_words: bool = False
     kinds: tuple[Kind, ...] = tuple(Kind)
+    negation_rate: float | None = None
+    """``None``: a correction's form is drawn uniformly among the allowed ones, as in the paper (a third are
+    negations). A number: the share of corrections that are negations, wherever a negation can single out
+    the goal; the rest are excuses and edits. A correction test sets it to measure negations with enough
+    episodes to judge them."""
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.correction_rate <= 1.0:
@@ -64,6 +65,11 @@ class InstructorSettings:
         if repeated:
             raise ValueError(f"kinds names {', '.join(repeated)} more than once")
         object.__setattr__(self, "kinds", kinds)
+        if self.negation_rate is not None:
+            if not 0.0 <= self.negation_rate <= 1.0:
+                raise ValueError(f"negation_rate must be within [0, 1], got {self.negation_rate}")
+            if self.negation_rate > 0 and not self.negations:
+                raise ValueError(f"negation_rate {self.negation_rate:g} needs negations=True: without them none is spoken")
         if self.correction_rate > 0 and not self.active_kinds:
             raise ValueError("kinds=['common_ground'] needs rare_words=True: without rare words there is no such case")
 
@@ -78,34 +84,24 @@ class Correction:
     """A spoken correction, as reported in the environment's ``info``."""
 
     kind: Kind
-    negation: bool
+    form: CorrectionForm
     text: str
     spoken_at: int
     triggered_at: int
 
+    @property
+    def negation(self) -> bool:
+        return self.form is CorrectionForm.NEGATION
+
     def as_info(self) -> dict[str, object]:
         return {
             "kind": self.kind.value,
+            "form": self.form.value,
             "negation": self.negation,
             "text": self.text,
             "spoken_at": self.spoken_at,
             "triggered_at": self.triggered_at,
         }
-
-
-def _matching(phrase: Phrase, objects: Sequence[ObjectProps]) -> set[int]:
-    return {i for i, o in enumerate(objects) if phrase.matches(o)}
-
-
-def _needs_colour(phrase: Phrase, others: Sequence[ObjectProps]) -> bool:
-    """Whether a listener who skips the phrase's colour word could still pick one of ``others``.
-
-    A common-ground instruction tests the rare colour word only if the rest of it leaves a choice: "the
-    azure brick" beside no other brick is understood from "brick" alone. The scene of such an episode is
-    drawn with another object of the goal's shape (:func:`~lanrocli.envs.scene.sample_objects`), so some
-    rare phrase always passes this test.
-    """
-    return any(phrase.shape is None or o.shape == phrase.shape for o in others)
 
 
 @dataclass
@@ -139,19 +135,13 @@ class Instructor:
     def start(self, rng: np.random.Generator, scene: Scene, challenge: Kind | None) -> None:
         self._scene, self.challenge, self.spoken, self._trigger = scene, challenge, None, None
         self._delay = int(rng.integers(self.settings.max_delay + 1))
-        goal, others = scene.goal, scene.others(scene.goal_index)
-        if challenge is Kind.AMBIGUITY:
-            phrases = ambiguous_phrases(goal, others)
-        elif challenge is Kind.COMMON_GROUND:
-            phrases = [p for p in identifying_phrases(goal, others, rare=True) if p.rare and _needs_colour(p, others)]
-        elif challenge is Kind.INSTRUCTION_CORRECTION:
+        named = None
+        if challenge is Kind.INSTRUCTION_CORRECTION:
             named = pick(rng, [i for i in range(len(scene.objects)) if i != scene.goal_index])
-            phrases = identifying_phrases(scene.objects[named], scene.others(named))
-        else:
-            phrases = identifying_phrases(goal, others)
+        phrases = opening_phrases(challenge, scene.objects, scene.goal_index, named)
         if not phrases:
             name = challenge.value if challenge else "plain"
-            raise RuntimeError(f"no {name} instruction exists for goal {goal} among {others}")
+            raise RuntimeError(f"no {name} instruction exists for goal {scene.goal} among {scene.others(scene.goal_index)}")
         self._phrase = pick(rng, phrases)
         self.instruction_text = instruction(pick(rng, TASK_VERBS[self.task]), self._phrase)
 
@@ -171,29 +161,28 @@ class Instructor:
         self.spoken = self._correct(rng, step, triggered_at, touched)
         return True
 
-    def _candidates(self) -> set[int]:
-        """The objects a listener who knows only the common words would still consider after the instruction."""
-        assert self._scene is not None and self._phrase is not None
-        everything = set(range(len(self._scene.objects)))
-        if self.challenge is Kind.INSTRUCTION_CORRECTION:
-            return everything  # the correction retracts the instruction's object
-        if self.challenge is Kind.COMMON_GROUND:
-            if self._phrase.shape is None:
-                return everything
-            return {i for i, o in enumerate(self._scene.objects) if o.shape == self._phrase.shape}
-        return _matching(self._phrase, self._scene.objects)
+    @property
+    def names_goal(self) -> bool:
+        """Whether the goal sentence now singles out the goal for a listener who knows only the common
+        words: always in a plain episode, and once the correction is spoken in a correction episode."""
+        return self.challenge is None or self.spoken is not None
+
+    def _form(self, rng: np.random.Generator) -> CorrectionForm:
+        rate = self.settings.negation_rate
+        if rate is None or not self.settings.negations:
+            return pick(rng, correction_forms(self.settings.negations))
+        return CorrectionForm.NEGATION if rng.random() < rate else pick(rng, NAMING_FORMS)
 
     def _correct(self, rng: np.random.Generator, step: int, triggered_at: int, touched: int) -> Correction:
-        assert self._scene is not None and self.challenge is not None
+        assert self._scene is not None and self.challenge is not None and self._phrase is not None
         objects, goal = self._scene.objects, self._scene.goal_index
-        candidates = self._candidates()
-        kind = pick(rng, beginning_kinds(self.settings.negations))
-        if kind is Beginning.NEGATION:
-            negations = [p for p in object_phrases(objects[touched]) if candidates - _matching(p, objects) == {goal}]
+        considered = candidates(self.challenge, self._phrase, objects)
+        form = self._form(rng)
+        if form is CorrectionForm.NEGATION:
+            negations = negation_phrases(objects, goal, touched, considered)
             if negations:
-                text = correction("not", pick(rng, negations))
-                return Correction(self.challenge, True, text, step, triggered_at)
-            kind = pick(rng, (Beginning.EXCUSE, Beginning.EDIT))
-        naming = [p for p in object_phrases(objects[goal]) if candidates & _matching(p, objects) == {goal}]
-        text = correction(pick(rng, BEGINNING_WORDS[kind]), pick(rng, naming))
-        return Correction(self.challenge, False, text, step, triggered_at)
+                text = correction(BEGINNING_WORDS[form][0], pick(rng, negations))
+                return Correction(self.challenge, form, text, step, triggered_at)
+            form = pick(rng, NAMING_FORMS)
+        text = correction(pick(rng, BEGINNING_WORDS[form]), pick(rng, naming_phrases(objects, goal, considered)))
+        return Correction(self.challenge, form, text, step, triggered_at)

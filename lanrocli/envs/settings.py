@@ -35,6 +35,13 @@ class EnvSettings:
         default=0.0, metadata=_help("Share of correction episodes, within [0, 1] (0: plain instructions).")
     )
     negations: bool = field(default=False, metadata=_help("Allow negating corrections ('not the red cube')."))
+    negation_rate: float | None = field(
+        default=None,
+        metadata=_help(
+            "Share of spoken corrections that are negations, where one can single out the goal (needs "
+            "negations; default: the forms drawn uniformly, a third negations)."
+        ),
+    )
     max_delay: int = field(default=0, metadata=_help("Corrections arrive 0..MAX_DELAY steps after the mistake."))
     rare_words: bool = field(default=False, metadata=_help("Allow rare colour words (the common-ground case)."))
     kinds: tuple[Kind, ...] | None = field(
@@ -84,6 +91,7 @@ class EnvSettings:
         return InstructorSettings(
             correction_rate=self.correction_rate,
             negations=self.negations,
+            negation_rate=self.negation_rate,
             max_delay=self.max_delay,
             rare_words=self.rare_words,
             kinds=tuple(Kind) if self.kinds is None else tuple(self.kinds),

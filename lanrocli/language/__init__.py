@@ -5,7 +5,7 @@ Pure Python and numpy: nothing here knows of physics or torch.
 
 from lanrocli.language.grammar import (
     BEGINNING_WORDS,
-    Beginning,
+    NAMING_FORMS,
     Form,
     Phrase,
     Sentence,
@@ -14,8 +14,8 @@ from lanrocli.language.grammar import (
     all_phrases,
     all_sentences,
     ambiguous_phrases,
-    beginning_kinds,
     correction,
+    correction_forms,
     extend,
     identifying_phrases,
     instruction,
@@ -38,6 +38,7 @@ from lanrocli.language.vocabulary import PAD_ID, UNK_ID, SentenceTooLong, Vocabu
 
 __all__ = [
     "BEGINNING_WORDS",
+    "NAMING_FORMS",
     "COLOURS",
     "PAD_ID",
     "RARE_COLOUR_WORDS",
@@ -46,7 +47,6 @@ __all__ = [
     "TASKS",
     "TASK_VERBS",
     "UNK_ID",
-    "Beginning",
     "Form",
     "ObjectProps",
     "Phrase",
@@ -58,9 +58,9 @@ __all__ = [
     "all_phrases",
     "all_sentences",
     "ambiguous_phrases",
-    "beginning_kinds",
     "check_task",
     "correction",
+    "correction_forms",
     "extend",
     "grammar_vocabulary",
     "identifying_phrases",

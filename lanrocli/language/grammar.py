@@ -22,6 +22,7 @@ from enum import Enum
 
 import numpy as np
 
+from lanrocli.choices import CorrectionForm
 from lanrocli.language.properties import (
     COLOURS,
     RARE_COLOUR_WORDS,
@@ -44,26 +45,22 @@ class Form(str, Enum):
     COLOUR = "colour"
 
 
-class Beginning(str, Enum):
-    """The three kinds of correction beginning."""
-
-    EXCUSE = "excuse"
-    NEGATION = "negation"
-    EDIT = "edit"
-
-
-BEGINNING_WORDS: dict[Beginning, tuple[str, ...]] = {
-    Beginning.EXCUSE: ("sorry", "excuse me", "no i meant", "pardon"),
-    Beginning.NEGATION: ("not",),
-    Beginning.EDIT: ("actually",),
+BEGINNING_WORDS: dict[CorrectionForm, tuple[str, ...]] = {
+    CorrectionForm.EXCUSE: ("sorry", "excuse me", "no i meant", "pardon"),
+    CorrectionForm.NEGATION: ("not",),
+    CorrectionForm.EDIT: ("actually",),
 }
+"""The words each form of correction begins with."""
+
+NAMING_FORMS: tuple[CorrectionForm, ...] = (CorrectionForm.EXCUSE, CorrectionForm.EDIT)
+"""The forms whose correction names the goal, replacing the instruction's object."""
 
 
-def beginning_kinds(negations: bool) -> tuple[Beginning, ...]:
-    """The beginnings the instructor may use; the negation only where a stage allows it."""
+def correction_forms(negations: bool) -> tuple[CorrectionForm, ...]:
+    """The forms the instructor may use; the negation only where a stage allows it."""
     if negations:
-        return (Beginning.EXCUSE, Beginning.NEGATION, Beginning.EDIT)
-    return (Beginning.EXCUSE, Beginning.EDIT)
+        return tuple(CorrectionForm)
+    return NAMING_FORMS
 
 
 @dataclass(frozen=True)
@@ -154,7 +151,7 @@ class Sentence:
     instruction: str
     correction: str | None
     form: Form
-    beginning: Beginning | None = None
+    beginning: CorrectionForm | None = None
 
     @property
     def text(self) -> str:
@@ -169,10 +166,10 @@ def all_instructions(task: str, rare: bool = False) -> Iterator[tuple[str, Form]
             yield instruction(verb, phrase), phrase.form
 
 
-def all_corrections(negations: bool = False) -> Iterator[tuple[str, Beginning]]:
-    """Every CORRECTION the grammar can speak, with its beginning's kind (never with rare words)."""
+def all_corrections(negations: bool = False) -> Iterator[tuple[str, CorrectionForm]]:
+    """Every CORRECTION the grammar can speak, with its form (never with rare words)."""
     phrases = all_phrases(rare=False)
-    for kind in beginning_kinds(negations):
+    for kind in correction_forms(negations):
         for beginning in BEGINNING_WORDS[kind]:
             for phrase in phrases:
                 yield correction(beginning, phrase), kind
@@ -211,7 +208,7 @@ def sample_sentence(
     text = instruction(verb, phrase)
     if not corrections:
         return Sentence(text, None, phrase.form)
-    kind = pick(rng, beginning_kinds(negations))
+    kind = pick(rng, correction_forms(negations))
     ctext = correction(pick(rng, BEGINNING_WORDS[kind]), sample_phrase(rng, rare=False))
     return Sentence(text, ctext, phrase.form, kind)
 

@@ -111,6 +111,7 @@ class TrainingEnv(gym.Wrapper):
         return {
             "achieved": np.asarray(info["achieved"], dtype=bool),
             "goal_index": int(info["goal_index"]),
+            "correction_episode": info["challenge"] is not None,
             "objects": self._objects,
             "is_success": bool(info["is_success"]),
         }
@@ -122,6 +123,7 @@ class _Partial:
 
     goal_index: int
     objects: tuple[ObjectProps, ...]
+    correction_episode: bool
     observations: list[np.ndarray] = field(default_factory=list)
     instructions: list[np.ndarray] = field(default_factory=list)
     next_observations: list[np.ndarray] = field(default_factory=list)
@@ -144,6 +146,7 @@ class _Partial:
             goal_index=self.goal_index,
             objects=self.objects,
             task=task,
+            correction_episode=self.correction_episode,
         )
 
 
@@ -202,7 +205,9 @@ class Collector:
     @staticmethod
     def _new_partial(info: dict[str, Any], i: int) -> _Partial:
         objects = tuple(ObjectProps.from_indices(colour, shape) for colour, shape in info["objects"][i])
-        return _Partial(goal_index=int(info["goal_index"][i]), objects=objects)
+        return _Partial(
+            goal_index=int(info["goal_index"][i]), objects=objects, correction_episode=bool(info["correction_episode"][i])
+        )
 
     @property
     def observation(self) -> dict[str, np.ndarray]:

@@ -177,7 +177,7 @@ class Trainer:
             action_dim,
             max_objects=settings.slots,
             vocabulary=self.vocabulary,
-            negations=settings.env.negations,
+            negations=settings.env.negations or settings.buffer.relabel_negations,
             seed=settings.seed,
         )
         self.rng = np.random.default_rng(np.random.SeedSequence(settings.seed).spawn(2)[1])
@@ -203,7 +203,7 @@ class Trainer:
         self.close()
         self._restore = None
         self.settings = dataclasses.replace(self.settings, env=env, stage=stage)
-        self.buffer.negations = env.negations
+        self.buffer.negations = env.negations or self.settings.buffer.relabel_negations
 
     # -- running -----------------------------------------------------------------------------------------
 

@@ -9,13 +9,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from lanrocli.choices import CorrectionForm
 from lanrocli.language import (
     BEGINNING_WORDS,
     COLOURS,
     RARE_COLOUR_WORDS,
     SHAPE_WORDS,
     TASK_VERBS,
-    Beginning,
     ObjectProps,
 )
 
@@ -40,7 +40,7 @@ class Noun:
 class Parsed:
     verb: str
     noun: Noun
-    beginning: Beginning | None
+    beginning: CorrectionForm | None
     corrected: Noun | None
 
 
@@ -88,13 +88,17 @@ def parse(text: str, task: str) -> Parsed:
 
 
 def referents(parsed: Parsed, objects: Sequence[ObjectProps], knows_rare: bool = True) -> list[int]:
-    """Indices of the objects the sentence designates: an excuse or edit replaces the instruction's
-    object, a negation removes objects from those the instruction fits."""
+    """Indices of the objects the sentence designates. A correction works on the objects the instruction
+    left open: an excuse or edit keeps those its phrase fits, a negation drops those its phrase fits. A
+    correction that leaves none of them retracts the instruction ("push the red cube actually the blue
+    cube", "push the red cube not the red cube") and works on every object instead."""
+    fits = [i for i, o in enumerate(objects) if parsed.noun.fits(o, knows_rare)]
     if parsed.beginning is None:
-        return [i for i, o in enumerate(objects) if parsed.noun.fits(o, knows_rare)]
+        return fits
     assert parsed.corrected is not None
-    if parsed.beginning is Beginning.NEGATION:
-        return [
-            i for i, o in enumerate(objects) if parsed.noun.fits(o, knows_rare) and not parsed.corrected.fits(o)
-        ]
-    return [i for i, o in enumerate(objects) if parsed.corrected.fits(o)]
+    corrected = parsed.corrected
+    if parsed.beginning is CorrectionForm.NEGATION:
+        kept = [i for i in fits if not corrected.fits(objects[i])]
+        return kept or [i for i, o in enumerate(objects) if not corrected.fits(o)]
+    kept = [i for i in fits if corrected.fits(objects[i])]
+    return kept or [i for i, o in enumerate(objects) if corrected.fits(o)]

@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from lanrocli.agent.buffer import Batch, EpisodeData, ReplayBuffer
+from lanrocli.choices import CorrectionForm
 
 from .episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
 from .sentences import parse, referents
@@ -93,7 +94,69 @@ def test_correction_share_sets_the_style_of_relabelled_sentences() -> None:
         for row in np.flatnonzero(batch.relabelled):
             episode, _ = _origin(batch, row, added)
             parsed = parse(VOCAB.decode(batch.instruction[row]), episode.task)
-            assert (parsed.beginning is not None) == expect_corrections
+            # A scene of one object has nothing to correct: its relabelled sentences stay plain.
+            assert (parsed.beginning is not None) == (expect_corrections and len(episode.objects) > 1)
+
+
+def test_fresh_targets_are_never_achieved_before_the_step() -> None:
+    buffer, added = _filled(capacity=5000, episodes=200, seed=4)
+    rng = np.random.default_rng(4)
+    stale = {False: 0, True: 0}
+    for fresh in (False, True):
+        for _ in range(20):
+            batch = buffer.sample(256, rng, relabel_ratio=1.0, fresh_targets=fresh)
+            for row in np.flatnonzero(batch.relabelled):
+                episode, step = _origin(batch, row, added)
+                stale[fresh] += bool(step > 0 and episode.achieved[step - 1, batch.named[row]])
+    assert stale[False] > 100 and stale[True] == 0
+
+
+def test_corrected_relabels_negate_the_object_the_arm_acted_on_first() -> None:
+    rng = np.random.default_rng(5)
+    buffer = ReplayBuffer(5000, OBS_DIM, ACTION_DIM, max_objects=3, seed=5)
+    added = {}
+    for i in range(300):
+        added[i] = random_episode(rng, i)
+        buffer.add_episode(added[i])
+    negations = 0
+    for _ in range(20):
+        batch = buffer.sample(256, rng, relabel_ratio=1.0, correction_share=1.0)
+        for row in np.flatnonzero(batch.relabelled):
+            episode, _ = _origin(batch, row, added)
+            parsed = parse(VOCAB.decode(batch.instruction[row]), episode.task)
+            first = np.where(episode.achieved.any(axis=0), np.argmax(episode.achieved, axis=0), len(episode))
+            first[batch.named[row]] = len(episode) + 1
+            if parsed.beginning is CorrectionForm.NEGATION and first.min() < len(episode):
+                negations += 1
+                assert parsed.corrected.fits(episode.objects[int(np.argmin(first))])
+    assert negations > 50
+
+
+def test_ground_real_labels_goals_only_where_the_sentence_names_them() -> None:
+    rng = np.random.default_rng(6)
+    buffer = ReplayBuffer(5000, OBS_DIM, ACTION_DIM, max_objects=3, seed=6)
+    added = {}
+    for i in range(200):
+        episode = random_episode(rng, i)
+        if i % 2 and len(episode) > 2:  # a correction episode whose correction is spoken halfway
+            episode.correction_episode = True
+            half = len(episode) // 2
+            episode.instructions[half:] = VOCAB.encode(VOCAB.decode(episode.instructions[0]) + " sorry the red cube")
+            episode.next_instructions[half - 1 :] = episode.instructions[half]
+        added[i] = episode
+        buffer.add_episode(episode)
+    labelled = pending = 0
+    for ground in (False, True):
+        batch = buffer.sample(1024, rng, relabel_ratio=0.5, ground_real=ground)
+        assert np.array_equal(batch.label[batch.relabelled], batch.named[batch.relabelled])
+        for row in np.flatnonzero(~batch.relabelled):
+            episode, step = _origin(batch, row, added)
+            still_pending = episode.correction_episode and step < len(episode) // 2
+            pending += still_pending
+            expected = episode.goal_index if ground and not still_pending else -1
+            assert batch.label[row] == expected
+            labelled += batch.label[row] >= 0
+    assert labelled > 100 and pending > 20
 
 
 def test_hindsight_share_draws_that_share_from_transitions_relabelling_can_use() -> None:
@@ -295,3 +358,17 @@ def test_n_step_needs_at_least_one_step() -> None:
     buffer, _ = _filled(capacity=300, episodes=5)
     with pytest.raises(ValueError, match="n_step"):
         buffer.sample(8, np.random.default_rng(0), n_step=0)
+
+
+def test_a_buffer_of_format_1_still_loads() -> None:
+    buffer, _ = _filled(capacity=2000, episodes=60, seed=9)
+    meta, arrays = buffer.state()
+    old = {k: v.copy() for k, v in arrays.items() if k not in ("names_goal", "first_achieved")}
+    old["corrected_pool"] = old["corrected_pool"][:, :, 1, :].copy()  # one sentence per target
+    loaded = ReplayBuffer.from_state({**meta, "format": 1}, old)
+    pool = loaded.data["corrected_pool"][: loaded.high]
+    for touched in range(3):
+        assert np.array_equal(pool[:, :, touched], old["corrected_pool"])
+    assert not loaded.data["names_goal"].any()
+    batch = loaded.sample(256, np.random.default_rng(0), relabel_ratio=1.0, correction_share=1.0, ground_real=True)
+    assert np.array_equal(batch.label, batch.named)

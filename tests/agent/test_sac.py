@@ -37,6 +37,7 @@ def _batch(rng: np.random.Generator, size: int = 64) -> Batch:
         next_instruction=instruction.copy(),
         done=np.ones(size, dtype=bool),
         named=np.full(size, -1),
+        label=np.full(size, -1),
         slots=np.arange(size),
         steps=np.ones(size, dtype=np.int64),
     )
@@ -76,6 +77,7 @@ def _grounding_batch(rng: np.random.Generator, size: int = 128) -> Batch:
     objects[:, 1, 0] = -objects[:, 0, 0]
     asks_red = (batch.instruction == RED).all(axis=1)
     batch.named[:] = np.where(asks_red == red_first, 0, 1)
+    batch.label = batch.named  # one array: rows left unnamed lose their label too
     return batch
 
 
@@ -104,6 +106,21 @@ def test_grounding_loss_teaches_every_reader_which_object_a_sentence_names() -> 
     assert metrics["grounding_loss"] < 0.2
 
 
+def test_without_the_sentence_in_the_trunk_it_acts_through_the_attention_alone() -> None:
+    """In a scene of one object the attention has one choice, so the sentence can change nothing."""
+    agent = _agent(architecture="objects", sentence_in_trunk=False)
+    obs = np.random.default_rng(0).normal(size=(2, OBS_DIM)).astype(np.float32)
+    obs[:, LAYOUT.arm + LAYOUT.object :] = 0.0  # the second slot is empty
+    red = agent.act({"observation": obs, "instruction": np.stack([RED, RED])}, deterministic=True)
+    blue = agent.act({"observation": obs, "instruction": np.stack([BLUE, BLUE])}, deterministic=True)
+    assert np.array_equal(red, blue)
+    with_trunk = _agent(architecture="objects")
+    red = with_trunk.act({"observation": obs, "instruction": np.stack([RED, RED])}, deterministic=True)
+    assert not np.allclose(red, with_trunk.act({"observation": obs, "instruction": np.stack([BLUE, BLUE])}, deterministic=True))
+    with pytest.raises(ValueError, match="sentence_in_trunk"):
+        SACSettings(architecture="flat", sentence_in_trunk=False)
+
+
 def test_grounding_loss_is_zero_without_readers_weight_or_relabelled_rows() -> None:
     rng = np.random.default_rng(0)
     assert _agent(architecture="flat").update(_grounding_batch(rng))["grounding_loss"] == 0.0
@@ -113,16 +130,20 @@ def test_grounding_loss_is_zero_without_readers_weight_or_relabelled_rows() -> N
 
 
 @pytest.mark.parametrize(
-    ("architecture", "depth", "grounding"), [("flat", 1, 0.0), ("objects", 1, 1.0), ("flat", 0, 0.0), ("objects", 2, 0.5)]
+    ("architecture", "depth", "grounding", "trunk"),
+    [("flat", 1, 0.0, True), ("objects", 1, 1.0, True), ("flat", 0, 0.0, True), ("objects", 2, 0.5, True),
+     ("objects", 1, 1.0, False)],
 )
 def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
-    architecture: str, depth: int, grounding: float
+    architecture: str, depth: int, grounding: float, trunk: bool
 ) -> None:
     """The update shares work between the losses (one pass of the encoders, the readers' attention computed
     once for the networks and the grounding loss, the critic's reading of the states reused for the policy's
     action, one backward pass); the gradients must be those of the losses written out one by one."""
     rng = np.random.default_rng(0)
-    agent = _agent(critics=2, architecture=architecture, hidden_layers=depth, grounding=grounding)
+    agent = _agent(
+        critics=2, architecture=architecture, hidden_layers=depth, grounding=grounding, sentence_in_trunk=trunk
+    )
     agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
     batch = _grounding_batch(rng)
     batch.named[::3] = -1  # not relabelled: no grounding label

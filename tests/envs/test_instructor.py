@@ -209,3 +209,56 @@ def test_beginnings_are_used() -> None:
         text = instructor.spoken.text
         starts.add(next(b for words in BEGINNING_WORDS.values() for b in words if text.startswith(b + " ")))
     assert starts == {b for words in BEGINNING_WORDS.values() for b in words}
+
+
+def spoken_forms(rate: float | None, n_objects: int, mode: Mode, episodes: int = 1000) -> tuple[float, int]:
+    """Share of negations among the corrections of ``episodes`` correction episodes of every kind, each
+    negation checked to leave the goal alone for a listener who knows only the common words."""
+    settings = InstructorSettings(correction_rate=1.0, negations=True, rare_words=True, negation_rate=rate)
+    negations = 0
+    for seed in range(episodes):
+        rng = np.random.default_rng(seed)
+        instructor = Instructor("push", settings)
+        challenge = instructor.draw_challenge(rng)
+        objects, goal = sample_objects(
+            rng, mode, n_objects, need_shared=challenge is Kind.AMBIGUITY, need_same_shape=challenge is Kind.COMMON_GROUND
+        )
+        scene = Scene(objects, goal, np.zeros((n_objects, 2)))
+        instructor.start(rng, scene, challenge)
+        wrong = int(rng.choice([i for i in range(n_objects) if i != goal]))
+        achieved = np.zeros(n_objects, dtype=bool)
+        achieved[wrong] = True
+        assert instructor.observe(rng, 1, achieved)
+        spoken = instructor.spoken
+        assert spoken is not None and spoken.negation == (spoken.form == "negation")
+        if spoken.negation:
+            negations += 1
+            named = parse_object(spoken.text.split()[-2:])
+            opening = instructor.instruction_text.split()[-2:]
+            if challenge is Kind.INSTRUCTION_CORRECTION:
+                considered = set(range(n_objects))
+            else:
+                colour, shape = parse_object(opening)
+                known = (None if opening[0] in COLOUR_OF_WORD else colour, shape)
+                considered = {i for i, o in enumerate(objects) if fits(known, o)}
+            assert fits(named, objects[wrong])
+            assert {i for i in considered if not fits(named, objects[i])} == {goal}
+    return negations / episodes, negations
+
+
+@pytest.mark.parametrize("rate", [0.25, 0.5, 1.0])
+def test_negation_rate_sets_the_share_of_negations_where_they_are_possible(rate: float) -> None:
+    # Between two objects a negation always singles out the goal: the share is the rate.
+    share, _ = spoken_forms(rate, 2, Mode.COLOUR)
+    assert abs(share - rate) < 0.05
+    # Among three, "not the ..." leaves one object only in some scenes; the rate holds among those.
+    possible, _ = spoken_forms(1.0, 3, Mode.COLOUR_SHAPE)
+    share, negations = spoken_forms(rate, 3, Mode.COLOUR_SHAPE)
+    assert 0.4 < possible < 0.8 and abs(share - rate * possible) < 0.05 and negations > 100
+
+
+def test_negation_rate_needs_negations() -> None:
+    with pytest.raises(ValueError, match="negation_rate"):
+        InstructorSettings(correction_rate=1.0, negation_rate=0.5)
+    with pytest.raises(ValueError, match="negation_rate"):
+        InstructorSettings(correction_rate=1.0, negations=True, negation_rate=1.5)

@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from lanrocli.choices import CorrectionForm
 from lanrocli.language import (
     BEGINNING_WORDS,
     COLOURS,
@@ -16,7 +17,6 @@ from lanrocli.language import (
     SHAPE_WORDS,
     TASK_VERBS,
     TASKS,
-    Beginning,
     ObjectProps,
     all_corrections,
     all_instructions,
@@ -81,9 +81,9 @@ def test_corrections_never_use_rare_words() -> None:
 
 
 def test_beginnings_cover_excuse_negation_edit() -> None:
-    assert BEGINNING_WORDS[Beginning.EXCUSE] == ("sorry", "excuse me", "no i meant", "pardon")
-    assert BEGINNING_WORDS[Beginning.NEGATION] == ("not",)
-    assert BEGINNING_WORDS[Beginning.EDIT] == ("actually",)
+    assert BEGINNING_WORDS[CorrectionForm.EXCUSE] == ("sorry", "excuse me", "no i meant", "pardon")
+    assert BEGINNING_WORDS[CorrectionForm.NEGATION] == ("not",)
+    assert BEGINNING_WORDS[CorrectionForm.EDIT] == ("actually",)
 
 
 def test_sampling_is_reproducible_and_valid() -> None:
@@ -98,7 +98,7 @@ def test_sampling_is_reproducible_and_valid() -> None:
         s = sample_sentence(rng, "grasp", corrections=True, negations=True, rare=True)
         assert s.instruction in instructions and s.correction in corrections
         seen_beginnings.add(s.beginning)
-    assert seen_beginnings == set(Beginning)
+    assert seen_beginnings == set(CorrectionForm)
 
 
 objects = st.builds(ObjectProps, st.sampled_from(COLOURS), st.sampled_from(tuple(SHAPE_WORDS)))
