@@ -65,11 +65,11 @@ class SACAgent:
             actor_encoder = None if s.share_encoder else LanguageEncoder(vocab_size, s.embedding_size, s.language_size)
             self.actor = Actor(
                 obs_dim, action_dim, actor_encoder, s.language_size, s.obs_size, s.hidden_size, s.hidden_layers,
-                s.log_std_min, s.log_std_max, self.layout, s.sentence_in_trunk,
+                s.log_std_min, s.log_std_max, self.layout, s.sentence_in_trunk, s.see_rest,
             ).to(self.device)
             self.critic = Critic(
                 obs_dim, action_dim, critic_encoder, s.obs_size, s.hidden_size, s.hidden_layers, s.critics, self.layout,
-                s.sentence_in_trunk,
+                s.sentence_in_trunk, s.see_rest,
             ).to(self.device)
         self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
         # The layout serves the normaliser whatever the architecture: objects share statistics across slots.

@@ -58,6 +58,10 @@ class SACSettings:
     observation. With ``architecture: objects`` and ``False`` the sentence acts through the attention
     alone: it picks the object, and the motor layers see the arm and that object, so a negation or an
     unfamiliar correction cannot disturb how the arm moves, only what it moves to."""
+    see_rest: bool = False
+    """With ``architecture: objects``, the layers after the attention see, beside the named object, the
+    others weighed by how little attention they get. After a correction the arm is often still at the
+    object it wrongly acted on; without this it cannot see that object once the attention leaves it."""
     share_encoder: bool = False
     """One sentence encoder for actor and critic, trained by the critic's loss only."""
     max_grad_norm: float | None = None
@@ -71,7 +75,7 @@ class SACSettings:
 
     ARCHITECTURE: ClassVar[tuple[str, ...]] = (
         "critics", "embedding_size", "language_size", "obs_size", "hidden_size", "hidden_layers", "architecture",
-        "share_encoder", "autotune_alpha", "sentence_in_trunk",
+        "share_encoder", "autotune_alpha", "sentence_in_trunk", "see_rest",
     )
     """The settings that shape the networks and the optimiser's state: a saved agent loads only into one
     that agrees on them."""
@@ -87,6 +91,8 @@ class SACSettings:
             raise ValueError("gamma and polyak must lie in [0, 1]")
         if not self.sentence_in_trunk and self.architecture != "objects":
             raise ValueError("sentence_in_trunk: false needs architecture 'objects': a flat network reads the sentence only there")
+        if self.see_rest and self.architecture != "objects":
+            raise ValueError("see_rest: true needs architecture 'objects': a flat network sees every object already")
         if self.grounding < 0.0:
             raise ValueError(f"grounding must not be negative, got {self.grounding}")
         if self.batch_size < 1 or self.hidden_layers < 0:

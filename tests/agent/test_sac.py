@@ -106,6 +106,22 @@ def test_grounding_loss_teaches_every_reader_which_object_a_sentence_names() -> 
     assert metrics["grounding_loss"] < 0.2
 
 
+def test_the_rest_is_the_object_the_attention_leaves() -> None:
+    agent = _agent(architecture="objects", see_rest=True)
+    reader = agent.actor.reader
+    obs = torch.as_tensor(np.random.default_rng(0).normal(size=(3, OBS_DIM)), dtype=torch.float32)
+    arm, objects = LAYOUT.split(obs)
+    present = torch.tensor([[True, True], [True, True], [True, False]])
+    scores = torch.tensor([[[30.0, 0.0], [0.0, 30.0], [0.0, torch.finfo(torch.float32).min]]])
+    out = reader(obs, torch.zeros(3, agent.settings.language_size), present, scores)[0]
+    named, rest = out[:, LAYOUT.arm : LAYOUT.arm + LAYOUT.object], out[:, LAYOUT.arm + LAYOUT.object :]
+    assert torch.allclose(named[0], objects[0, 0], atol=1e-5) and torch.allclose(rest[0], objects[0, 1], atol=1e-5)
+    assert torch.allclose(named[1], objects[1, 1], atol=1e-5) and torch.allclose(rest[1], objects[1, 0], atol=1e-5)
+    assert torch.allclose(named[2], objects[2, 0]) and not rest[2].any()  # alone: nothing else to see
+    with pytest.raises(ValueError, match="see_rest"):
+        SACSettings(architecture="flat", see_rest=True)
+
+
 def test_without_the_sentence_in_the_trunk_it_acts_through_the_attention_alone() -> None:
     """In a scene of one object the attention has one choice, so the sentence can change nothing."""
     agent = _agent(architecture="objects", sentence_in_trunk=False)
@@ -130,19 +146,20 @@ def test_grounding_loss_is_zero_without_readers_weight_or_relabelled_rows() -> N
 
 
 @pytest.mark.parametrize(
-    ("architecture", "depth", "grounding", "trunk"),
-    [("flat", 1, 0.0, True), ("objects", 1, 1.0, True), ("flat", 0, 0.0, True), ("objects", 2, 0.5, True),
-     ("objects", 1, 1.0, False)],
+    ("architecture", "depth", "grounding", "trunk", "rest"),
+    [("flat", 1, 0.0, True, False), ("objects", 1, 1.0, True, False), ("flat", 0, 0.0, True, False),
+     ("objects", 2, 0.5, True, False), ("objects", 1, 1.0, False, True)],
 )
 def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
-    architecture: str, depth: int, grounding: float, trunk: bool
+    architecture: str, depth: int, grounding: float, trunk: bool, rest: bool
 ) -> None:
     """The update shares work between the losses (one pass of the encoders, the readers' attention computed
     once for the networks and the grounding loss, the critic's reading of the states reused for the policy's
     action, one backward pass); the gradients must be those of the losses written out one by one."""
     rng = np.random.default_rng(0)
     agent = _agent(
-        critics=2, architecture=architecture, hidden_layers=depth, grounding=grounding, sentence_in_trunk=trunk
+        critics=2, architecture=architecture, hidden_layers=depth, grounding=grounding, sentence_in_trunk=trunk,
+        see_rest=rest,
     )
     agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
     batch = _grounding_batch(rng)
