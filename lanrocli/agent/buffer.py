@@ -56,6 +56,7 @@ class EpisodeData:
     goal_index: int
     objects: tuple[ObjectProps, ...]
     task: str
+    fell: np.ndarray | None = None  # bool [T]: step t ended the episode by dropping an object; None: never
     correction_episode: bool = False
     """Whether the instructor set this episode up for a correction: its instruction singles out the goal
     only once the correction is spoken (the environment's ``info["challenge"]`` is not None)."""
@@ -70,7 +71,9 @@ class Batch:
     object slot its new sentence singles out, -1 for the others. ``label``: the object slot the
     transition's sentence singles out where that is known (``named``, and with ``ground_real`` sampling
     the goal of a stored transition whose sentence names it), -1 elsewhere; the attention is taught on
-    it. ``slots``: where in the buffer each transition is stored, to look up what the batch does not carry.
+    it. ``failed``: with ``falls_fail`` sampling, the transition's last step dropped an object off the table
+    without winning, so the episode is lost for good (``done`` is then set too). ``slots``: where in the
+    buffer each transition is stored, to look up what the batch does not carry.
 
     ``steps``: how many stored steps each transition spans. With n-step sampling ``reward`` is the return
     discounted over those steps, ``next_obs`` and ``next_instruction`` are read after the last of them, and
@@ -85,6 +88,7 @@ class Batch:
     done: np.ndarray  # bool [B]
     named: np.ndarray  # int64 [B]
     label: np.ndarray  # int64 [B]
+    failed: np.ndarray  # bool [B]
     slots: np.ndarray  # int64 [B]
     steps: np.ndarray  # int64 [B], 1 for one-step transitions
 
@@ -105,6 +109,7 @@ def _layout(obs_dim: int, action_dim: int, max_objects: int, length: int) -> dic
         "instruction": (np.uint8, (length,)),
         "next_instruction": (np.uint8, (length,)),
         "achieved": (np.bool_, (max_objects,)),
+        "fell": (np.bool_, ()),
         "names_goal": (np.bool_, ()),  # the sentence read with obs singles out the goal
         "first_achieved": (np.int32, (max_objects,)),  # the episode's first step achieving each object
         "goal_index": (np.uint8, ()),
@@ -200,6 +205,7 @@ class ReplayBuffer:
         d["action"][lo:hi] = episode.actions
         d["reward"][lo:hi] = episode.rewards
         d["terminated"][lo:hi] = episode.terminated
+        d["fell"][lo:hi] = False if episode.fell is None else episode.fell
         d["instruction"][lo:hi] = episode.instructions
         d["next_instruction"][lo:hi] = episode.next_instructions
         d["achieved"][lo:hi] = False
@@ -288,6 +294,7 @@ class ReplayBuffer:
         gamma: float = 1.0,
         fresh_targets: bool = False,
         ground_real: bool = False,
+        falls_fail: bool = False,
     ) -> Batch:
         """``batch_size`` transitions drawn with replacement: a share ``hindsight_share`` (binomially) from
         the transitions whose episode achieves the task on an identifiable object at that step or later, the
@@ -306,6 +313,10 @@ class ReplayBuffer:
         ``ground_real``: a stored transition whose sentence singles out its goal (every step of a plain
         episode, and the steps after the correction of a correction episode) is labelled with the goal
         for the attention loss; one whose correction is still pending never is.
+
+        ``falls_fail``: a transition whose last step dropped an object off the table, where its goal is
+        not won at that step, is ``failed`` and ``done``: the environment ends such an episode, and the
+        learner is to value what follows as failure for ever, not as the time limit it otherwise resembles.
 
         With ``n_step`` above 1 each transition spans up to ``n_step`` stored steps of its episode (fewer where
         the episode ends first, or where its goal, the relabelled one included, is achieved first): see
@@ -364,11 +375,15 @@ class ReplayBuffer:
             done=done,
             named=named,
             label=label,
+            failed=np.zeros(batch_size, dtype=bool),
             slots=idx,
             steps=np.ones(batch_size, dtype=np.int64),
         )
         if n_step > 1:
             self._extend(batch, relabel, target, n_step, gamma)
+        if falls_fail:
+            batch.failed = d["fell"][batch.slots + batch.steps - 1] & ~batch.done
+            batch.done = batch.done | batch.failed
         return batch
 
     def _touched(self, rows: np.ndarray, target: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -498,5 +513,6 @@ _ADDED_IN_2: dict[str, Callable[[np.ndarray, Mapping[str, np.ndarray]], None]] =
     # What format 1 did not record reads as not known: no real transition is labelled for the attention,
     # and relabelled corrections draw the touched object uniformly.
     "names_goal": lambda array, _: array.fill(False),
+    "fell": lambda array, _: array.fill(False),
     "first_achieved": lambda array, _: array.fill(NEVER),
 }

@@ -144,6 +144,11 @@ class BufferSettings:
     """Teach the attention on stored transitions too: wherever a transition's sentence singles out its
     goal (every step of a plain episode, the steps after a spoken correction), the goal is its label. A
     transition whose correction is still pending is never labelled."""
+    falls_fail: bool = False
+    """Value an episode that ended by dropping an object off the table as lost for good (the return of a
+    failure that never ends, -1 / (1 - gamma)) rather than as one cut off by the time limit, whose future
+    is bootstrapped. Without it nothing teaches the agent to keep objects on the table: pushing the wrong
+    object on until it falls, while a correction is on its way, costs nothing in the targets."""
     n_step: int = 1
     """Bellman targets over this many stored steps (n-step returns), cut at the episode's end and at its
     goal's success: a sparse success reaches the states that led to it in 1/n of the updates. 1 is the
@@ -168,4 +173,5 @@ class BufferSettings:
             "n_step": self.n_step,
             "fresh_targets": self.fresh_targets,
             "ground_real": self.ground_real,
+            "falls_fail": self.falls_fail,
         }

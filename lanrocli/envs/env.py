@@ -90,7 +90,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ``instruction`` is the current goal sentence (instruction, plus the correction from the step it is
     spoken) in the grammar-wide vocabulary, padded with 0. Reward is 0 when the task holds for the goal
     object, else -1; success ends the episode (terminated), and so does an object falling off the table
-    (truncated). ``info`` carries ``is_success``, ``achieved`` (per object), ``goal_index``,
+    (truncated, with ``info["fell"]``: the episode is lost, not merely out of time). ``info`` carries
+    ``is_success``, ``achieved`` (per object), ``goal_index``,
     ``object_positions``, ``objects`` (``ObjectProps`` in observation order), ``instruction_text``,
     ``challenge`` (the ``Kind`` of misunderstanding of a correction episode, or ``None``) and ``correction``
     (``None`` until spoken).
@@ -147,6 +148,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._tokens = np.zeros(self.vocabulary.max_length, dtype=np.int64)
         self._achieved = np.zeros(objects, dtype=bool)
         self._steps = 0
+        self._fell = False
         self._area_low = np.array(OBJECT_AREA.low[:2])
         self._area_high = np.array(OBJECT_AREA.high[:2])
         self._spacing = MIN_SPACING_SIZES * 2 * max(max(s.half_extents[:2]) for s in SIM_SHAPES.values())
@@ -185,6 +187,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._tokens = self.vocabulary.encode(self.instructor.text)
         self._steps = 0
         self._achieved = self._evaluate()
+        self._fell = False
         return self._observation(), self._info()
 
     def _reset_arm(self, rng: np.random.Generator) -> None:
@@ -229,8 +232,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self._tokens = self.vocabulary.encode(self.instructor.text)
         success = bool(self._achieved[self._scene.goal_index])
         # Truncated, not terminated: ending there must not look like the zero future value of a success.
-        fallen = bool(np.any(self.objects.states().positions[:, 2] < FALLEN))
-        truncated = not success and (self._steps >= self.max_episode_steps or fallen)
+        self._fell = not success and bool(np.any(self.objects.states().positions[:, 2] < FALLEN))
+        truncated = not success and (self._steps >= self.max_episode_steps or self._fell)
         return self._observation(), reward(success), success, truncated, self._info()
 
     # -- what the agent and the tools see --------------------------------------------------------------
@@ -279,6 +282,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "objects": self._scene.objects,
             "instruction_text": self.instructor.text,
             "challenge": self.instructor.challenge,
+            "fell": self._fell,
             "correction": None if spoken is None else spoken.as_info(),
         }
 

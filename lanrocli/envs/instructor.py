@@ -68,7 +68,7 @@ class InstructorSettings:
         if self.negation_rate is not None:
             if not 0.0 <= self.negation_rate <= 1.0:
                 raise ValueError(f"negation_rate must be within [0, 1], got {self.negation_rate}")
-            if self.negation_rate > 0 and not self.negations:
+            if self.negation_rate > 0 and self.correction_rate > 0 and not self.negations:
                 raise ValueError(f"negation_rate {self.negation_rate:g} needs negations=True: without them none is spoken")
         if self.correction_rate > 0 and not self.active_kinds:
             raise ValueError("kinds=['common_ground'] needs rare_words=True: without rare words there is no such case")

@@ -114,6 +114,7 @@ class TrainingEnv(gym.Wrapper):
             "correction_episode": info["challenge"] is not None,
             "objects": self._objects,
             "is_success": bool(info["is_success"]),
+            "fell": bool(info["fell"]),
         }
 
 
@@ -132,6 +133,7 @@ class _Partial:
     rewards: list[float] = field(default_factory=list)
     terminated: list[bool] = field(default_factory=list)
     achieved: list[np.ndarray] = field(default_factory=list)
+    fell: list[bool] = field(default_factory=list)
 
     def episode(self, task: str) -> EpisodeData:
         return EpisodeData(
@@ -143,6 +145,7 @@ class _Partial:
             rewards=np.asarray(self.rewards, dtype=np.float32),
             terminated=np.asarray(self.terminated, dtype=bool),
             achieved=np.stack(self.achieved),
+            fell=np.asarray(self.fell, dtype=bool),
             goal_index=self.goal_index,
             objects=self.objects,
             task=task,
@@ -221,6 +224,8 @@ class Collector:
                 setattr(p, key, list(data[key]))
             p.rewards = list(map(float, data["rewards"]))
             p.terminated = list(map(bool, data["terminated"]))
+            # Checkpoints written before falls were recorded: a fall ends its episode, so none is in a partial.
+            p.fell = list(map(bool, data.get("fell", np.zeros(len(p.rewards), dtype=bool))))
 
     def partials(self) -> list[dict[str, np.ndarray]]:
         """Each environment's unfinished episode as arrays, for the checkpoint."""
@@ -244,6 +249,7 @@ class Collector:
                     "rewards": rows(p.rewards, np.float32),
                     "terminated": rows(p.terminated, bool),
                     "achieved": rows(p.achieved, bool, len(p.objects)),
+                    "fell": rows(p.fell, bool),
                 }
             )
         return out
@@ -275,6 +281,7 @@ class Collector:
             p.rewards.append(float(rewards[i]))
             p.terminated.append(bool(terminated[i]))
             p.achieved.append(np.asarray(step_info["achieved"][i], dtype=bool))
+            p.fell.append(bool(step_info["fell"][i]))
             if ended:
                 finished.append(FinishedEpisode(p.episode(self.task), bool(step_info["is_success"][i])))
                 self._partials[i] = self._new_partial(info, i)

@@ -372,3 +372,31 @@ def test_a_buffer_of_format_1_still_loads() -> None:
     assert not loaded.data["names_goal"].any()
     batch = loaded.sample(256, np.random.default_rng(0), relabel_ratio=1.0, correction_share=1.0, ground_real=True)
     assert np.array_equal(batch.label, batch.named)
+
+
+def test_falls_fail_marks_the_step_that_dropped_an_object_unless_it_won() -> None:
+    rng = np.random.default_rng(10)
+    buffer = ReplayBuffer(5000, OBS_DIM, ACTION_DIM, max_objects=3, seed=10)
+    added = {}
+    for i in range(200):
+        episode = random_episode(rng, i)
+        if not episode.terminated[-1]:
+            episode.fell = np.zeros(len(episode), dtype=bool)
+            episode.fell[-1] = True  # the episode ended by dropping an object
+        added[i] = episode
+        buffer.add_episode(episode)
+    failed = 0
+    for falls in (False, True):
+        batch = buffer.sample(1024, rng, relabel_ratio=0.5, falls_fail=falls)
+        for row in range(1024):
+            episode, step = _origin(batch, row, added)
+            dropped = episode.fell is not None and bool(episode.fell[step])
+            won = batch.reward[row] == 0.0
+            assert batch.failed[row] == (falls and dropped and not won)
+            if batch.failed[row]:
+                assert batch.done[row]
+                failed += 1
+    assert failed > 20
+    batch = buffer.sample(512, rng, relabel_ratio=0.5, falls_fail=True, n_step=3, gamma=0.9)
+    dropped_last = buffer.data["fell"][batch.slots + batch.steps - 1]
+    assert batch.failed.any() and not (batch.failed & ~dropped_last).any() and batch.done[batch.failed].all()

@@ -38,6 +38,7 @@ def _batch(rng: np.random.Generator, size: int = 64) -> Batch:
         done=np.ones(size, dtype=bool),
         named=np.full(size, -1),
         label=np.full(size, -1),
+        failed=np.zeros(size, dtype=bool),
         slots=np.arange(size),
         steps=np.ones(size, dtype=np.int64),
     )
@@ -440,3 +441,13 @@ def test_states_move_between_cpu_and_cuda_in_both_directions() -> None:
         assert all(t.device.type == target for t in [*_parameters(moved), moved.normalizer.mean])
         np.testing.assert_allclose(agent.act(obs, deterministic=True), moved.act(obs, deterministic=True), atol=1e-5)
         assert np.isfinite(moved.update(_batch(rng))["critic_loss"]) and moved.updates == 2
+
+
+def test_a_lost_episode_is_valued_as_failure_for_ever() -> None:
+    agent = _agent(architecture="flat")
+    batch = _batch(np.random.default_rng(0))
+    batch.reward[:] = -1.0
+    batch.failed[:] = True  # done is set already: nothing is bootstrapped
+    assert agent.update(batch)["target_q_mean"] == pytest.approx(-1.0 / (1.0 - agent.settings.gamma))
+    batch.failed[:] = False
+    assert agent.update(batch)["target_q_mean"] == pytest.approx(-1.0)

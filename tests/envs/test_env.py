@@ -22,6 +22,7 @@ INFO_KEYS = {
     "instruction_text",
     "challenge",
     "correction",
+    "fell",
 }
 
 
@@ -315,11 +316,12 @@ def test_start_shares_split_the_episodes_and_need_a_gripper() -> None:
 def test_an_object_falling_off_the_table_truncates_the_episode() -> None:
     env = LanroEnv("push", objects=2)
     env.reset(seed=0)
-    _, _, terminated, truncated, _ = env.step(np.zeros(3))
-    assert not (terminated or truncated)
+    _, _, terminated, truncated, info = env.step(np.zeros(3))
+    assert not (terminated or truncated or info["fell"])
     body = env.objects.body_ids[1]
     env.world.client.resetBasePositionAndOrientation(body, (0.5, 0.0, -0.1), (0.0, 0.0, 0.0, 1.0))
     env.world.invalidate()
     _, reward, terminated, truncated, info = env.step(np.zeros(3))
     assert truncated and not terminated and reward == -1.0 and info["object_positions"][1, 2] < -0.1
+    assert info["fell"]  # the learner tells this end from the time limit's
     env.close()
