@@ -157,24 +157,39 @@ def _percent(rate: float) -> str:
 
 
 def _print_report(report: EvaluationReport, title: str) -> None:
+    from lanrocli.envs.evaluation import FIGURE, JUDGED
+
     table = Table(title=title)
     for column in ("episodes", "", "success", "95% CI"):
         table.add_column(column, justify="right" if column != "" else "left")
     rows = [
-        ("all episodes", report.overall),
-        ("correction episodes", report.correction_episodes),
-        ("a correction was spoken (corrected)", report.corrected),
+        ("all episodes", report.overall, False),
+        ("correction episodes", report.correction_episodes, False),
+        ("a correction was spoken (corrected)", report.corrected, False),
     ]
     corrected = report.corrected_by_kind()
     for kind, rate in report.by_kind().items():
-        rows += [(f"  {kind}", rate), (f"    {kind}, correction spoken", corrected[kind])]
-    rows += [(f"  correction spoken, {name.replace('_', ' ')}", rate) for name, rate in report.by_negation().items()]
-    for name, rate in rows:
+        rows += [(f"  {kind}", rate, False), (f"    {kind}, correction spoken", corrected[kind], True)]
+    rows += [
+        (f"  correction spoken, {FIGURE[f'corrected_success_{form}'].label}", rate, True)
+        for form, rate in report.by_form().items()
+    ]
+    unjudged = False
+    for name, rate, split in rows:
         low, high = rate.interval
         ci = "-" if not rate.episodes else f"[{100 * low:.1f}, {100 * high:.1f}]"
-        table.add_row(str(rate.episodes), name, _percent(rate.success), ci)
-    Console().print(table)
-    Console().print(f"mean episode length {report.mean_length:.1f} steps, mean return {report.mean_return:.1f}")
+        mark = split and rate.episodes > 0 and not rate.judged
+        unjudged |= mark
+        table.add_row(str(rate.episodes), name + (" *" if mark else ""), _percent(rate.success), ci)
+    console = Console()
+    console.print(table)
+    if unjudged:
+        console.print(f"* fewer than {JUDGED} spoken corrections: shown, not judged", highlight=False)
+    console.print(f"mean episode length {report.mean_length:.1f} steps, mean return {report.mean_return:.1f}")
+    attention = report.attention_on_goal()
+    if attention is not None:
+        shares = ", ".join(f"{phase} {'-' if v is None else f'{v:.2f}'}" for phase, v in attention.items())
+        console.print(f"attention on the goal object (mean share over steps): {shares}", highlight=False)
 
 
 def _env_summary(env: EnvSettings) -> str:
@@ -280,17 +295,34 @@ def evaluate_command(
     device: Annotated[str | None, typer.Option(help="cpu or cuda for a trained agent (default: cuda if available).")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
     gif: Annotated[Path | None, typer.Option(help="Write the first episodes as an animated GIF here.")] = None,
+    correction_test: Annotated[
+        bool,
+        typer.Option(
+            "--correction-test",
+            help="A trained agent on its stage's correction test, as its run measured it: every episode a "
+            "correction episode (half the spoken corrections negations, where the stage has them), on episodes "
+            "of their own, until enough corrections and negations were spoken to judge each kind and form. "
+            "--episodes caps the episodes.",
+        ),
+    ] = False,
     **env_options: Any,
 ) -> None:
     """Evaluate a scripted policy or a trained agent: success overall, on correction episodes, where a correction
-    was spoken, per kind, with 95% intervals. For a checkpoint, the environment defaults to the stage it was
-    trained on and the episodes to that stage's held-out test episodes; options change them."""
+    was spoken, per kind and form of correction, with 95% intervals. For a checkpoint, the environment defaults
+    to the stage it was trained on and the episodes to that stage's held-out test episodes; options change them."""
     from lanrocli.envs.env import LanroEnv
     from lanrocli.envs.evaluation import evaluate
     from lanrocli.envs.policies import make_policy
 
     changes = _env_changes(env_options)
+    if correction_test and (seed is not None or instruction is not Instruction.TRUE or gif is not None):
+        raise fail("--correction-test runs episodes of its own, as the sentence the instructor speaks; leave out "
+                   "--seed, --instruction and --gif")
     if what in {p.value for p in PolicyName}:
+        if correction_test:
+            raise fail(
+                "--correction-test measures a trained agent on its run's held-out seeds; a scripted policy has none"
+            )
         if instruction is not Instruction.TRUE:
             raise fail("--instruction changes what a trained agent reads; scripted policies read no sentence")
         task_name = task or Task.REACH
@@ -306,8 +338,19 @@ def evaluate_command(
             env.close()
         record = {"policy": what, "task": task_name, "env": env_settings.to_dict(), **report.as_dict()}
         where = f"seed {first}"
+    elif correction_test:
+        measurement = _measure_checkpoint(Path(what), task, device, _correction_test(Path(what), changes, episodes))
+        report, record, task_name, env_settings = (
+            measurement.report, measurement.record, measurement.settings.task, measurement.env
+        )
+        quota = record["quota"]
+        negations = f" and {quota['negations']} negations" if quota["negations"] else ""
+        met = "reached" if record["quota_met"] else f"not reached in {quota['episodes']} episodes"
+        where = f"correction test ({quota['spoken']} spoken corrections{negations}: {met})"
     else:
-        measurement = _measure_checkpoint(Path(what), task, changes, episodes, seed, instruction, device, gif)
+        measurement = _measure_checkpoint(
+            Path(what), task, device, _test(Path(what), changes, episodes, seed, instruction, gif)
+        )
         report, record, task_name, env_settings = (
             measurement.report, measurement.record, measurement.settings.task, measurement.env
         )
@@ -322,19 +365,40 @@ def evaluate_command(
         Console().print(f"wrote {gif}")
 
 
-def _measure_checkpoint(
-    path: Path,
-    task: Task | None,
-    overrides: dict[str, Any],
-    episodes: int | None,
-    seed: int | None,
-    shown: Instruction,
-    device: str | None,
-    gif: Path | None,
-) -> Measurement:
-    """The trained agent at ``path`` measured as ``lanro eval`` was asked; every problem is a clear error."""
-    from lanrocli.train.runfolder import CheckpointError
+Check = Callable[["TrainSettings", EnvSettings], None]
+Measure = Callable[[Any, Check], "Measurement"]
+"""How ``lanro eval`` measures a checkpoint, given the torch device and the check of its settings."""
+
+
+def _test(
+    path: Path, overrides: dict[str, Any], episodes: int | None, seed: int | None, shown: Instruction, gif: Path | None
+) -> Measure:
+    """The checkpoint at ``path`` on its test episodes, or on others as the options ask."""
     from lanrocli.train.testset import measure
+
+    def run(device: Any, check: Check) -> Measurement:
+        return measure(path, episodes or _test_episodes(path), device, overrides, seed, shown, gif, check=check)
+
+    return run
+
+
+def _correction_test(path: Path, overrides: dict[str, Any], episodes: int | None) -> Measure:
+    """The checkpoint at ``path`` on the correction test its run made: the quota sized like its test, at most
+    ``episodes`` episodes where given."""
+    from lanrocli.train.testset import CORRECTION_QUOTA, correction_test
+
+    def run(device: Any, check: Check) -> Measurement:
+        quota = CORRECTION_QUOTA.scaled(_test_episodes(path))
+        if episodes is not None:
+            quota = dataclasses.replace(quota, episodes=episodes)
+        return correction_test(path, quota, device, overrides, check=check)
+
+    return run
+
+
+def _measure_checkpoint(path: Path, task: Task | None, device: str | None, run: Measure) -> Measurement:
+    """The trained agent at ``path`` measured as ``run`` does; every problem is a clear error."""
+    from lanrocli.train.runfolder import CheckpointError
     from lanrocli.train.trainer import pick_device
 
     if not path.exists():
@@ -347,9 +411,7 @@ def _measure_checkpoint(
             raise fail(f"{path} observes at most {settings.slots} objects; --objects must not exceed that")
 
     try:
-        torch_device = pick_device(device)
-        count = episodes or _test_episodes(path)
-        return measure(path, count, torch_device, overrides, seed, shown, gif, check=check)
+        return run(pick_device(device), check)
     except (CheckpointError, KeyError) as error:
         raise fail(f"cannot load a trained agent from {path}: {error}") from None
     except ValueError as error:
@@ -723,9 +785,10 @@ def report_command(
 ) -> None:
     """Aggregate runs and sweeps per task and stage, with bootstrap intervals over runs.
 
-    For each stage: the steps it took, and its agent's test figures (success, corrected, per kind, after a
-    negation) as the mean over runs with a 95% stratified bootstrap interval, and the interquartile mean from
-    five runs on. Runs that differ in their settings are grouped and compared side by side.
+    For each stage: the steps it took, and its agent's test figures (success, corrected, per kind and form of
+    correction; for the last stage also its correction test) as the mean over runs with a 95% stratified
+    bootstrap interval, and the interquartile mean from five runs on; a kind or form some run heard too few
+    times to judge is marked *. Runs that differ in their settings are grouped and compared side by side.
     """
     from lanrocli.sweep.report import ReportError, make_report, to_json, to_markdown
 

@@ -254,3 +254,27 @@ def test_train_on_a_device_this_machine_cannot_serve_is_a_clear_error(tmp_path: 
     assert result.exit_code == 2, result.output
     assert "error:" in result.output and device in result.output and "Traceback" not in result.output
     assert not out.exists(), "the device is checked before the run folder is made"
+
+
+def test_eval_table_has_every_form_and_marks_what_is_not_judged() -> None:
+    result = runner.invoke(
+        app, ["eval", "mistaken", "--episodes", "3", "--correction-rate", "1", "--negations", "--kinds", "wrong_object"]
+    )
+    assert result.exit_code == 0, result.output
+    for form in ("after an excuse", "after a negation", "after an edit"):
+        assert f"correction spoken, {form}" in result.output
+    assert "wrong_object, correction spoken *" in result.output and "* fewer than 30 spoken corrections" in result.output
+
+
+def test_eval_correction_test_of_a_checkpoint_and_its_refusals(untrained_checkpoint: Path) -> None:
+    result = runner.invoke(app, ["eval", str(untrained_checkpoint), "--correction-test", "--episodes", "2", "--json"])
+    assert result.exit_code == 0, result.output
+    record = json.loads(result.output)
+    assert record["episodes_from"]["correction_test"] and record["env"]["correction_rate"] == 1.0
+    assert record["episodes"] <= 2 and record["quota"]["episodes"] == 2 and "by_form" in record
+    table = runner.invoke(app, ["eval", str(untrained_checkpoint), "--correction-test", "--episodes", "1"])
+    assert table.exit_code == 0 and "correction test (" in table.output, table.output
+    refused = runner.invoke(app, ["eval", "oracle", "--correction-test"])
+    assert refused.exit_code == 2 and "scripted policy" in refused.output
+    refused = runner.invoke(app, ["eval", str(untrained_checkpoint), "--correction-test", "--seed", "4"])
+    assert refused.exit_code == 2 and "--seed" in refused.output

@@ -6,7 +6,9 @@ promoted it (the run state in its latest checkpoint) and the test of the stage's
 task and each stage, every figure is given as the mean over runs with its 95% stratified bootstrap interval
 (:mod:`lanrocli.stats`), and as the interquartile mean too where at least five runs have it. With several
 groups the first is the reference: for each other group, the probability that one of its runs beats one of
-the reference's (higher success, fewer steps), with its interval.
+the reference's (higher success, fewer steps), with its interval. The figures of one kind or form of
+correction are marked where some run heard fewer than ``JUDGED`` of them: shown, not judged. The last
+stage's correction test is aggregated like the test, its figures prefixed ``correction_test_``.
 
 A run that has not ended every stage counts for the stages it has ended. Reading needs neither torch nor
 Ray, so a report is made in a moment on any machine that sees the folders.
@@ -23,11 +25,12 @@ from typing import Any
 import numpy as np
 import yaml
 
-from lanrocli.choices import Kind
+from lanrocli.envs.evaluation import FIGURE, FIGURES, JUDGED, Figure
 from lanrocli.stats import CONFIDENCE, IQM_RUNS, REPS, Estimate, bootstrap, iqm, probability_of_improvement
 from lanrocli.sweep.groups import Group, group_runs
 from lanrocli.train.runfolder import (
     CONFIG,
+    CORRECTION_TEST,
     LATEST,
     STATE_FILE,
     TEST,
@@ -40,30 +43,38 @@ from lanrocli.train.runfolder import (
 STEPS = "stage_steps"
 
 
-def _rate(record: dict[str, Any], *keys: str) -> float | None:
-    node: Any = record
-    for key in keys:
-        node = node.get(key) if isinstance(node, dict) else None
-    if not isinstance(node, dict) or not node.get("episodes"):
-        return None
-    return node.get("success")
+@dataclass(frozen=True)
+class Reported:
+    """A test figure ``lanro report`` aggregates: its label, and how to read it from a stage's ``test.json``
+    for one agent as (episodes, success); judged only from ``JUDGED`` episodes on where ``split``."""
+
+    label: str
+    read: Callable[[dict[str, Any], str], tuple[int, float | None]]
+    split: bool
 
 
-METRICS: dict[str, tuple[str, Callable[[dict[str, Any]], float | None]]] = {
-    "success": ("success", lambda r: r["success"] if r.get("episodes") else None),
-    "correction_episode_success": (
-        "correction episodes",
-        lambda r: r.get("correction_episode_success") if r.get("correction_episodes") else None,
-    ),
-    "corrected_success": ("corrected", lambda r: _rate(r, "corrected")),
-    **{
-        f"corrected_success_{kind.value}": (kind.value.replace("_", " "), lambda r, k=kind.value: _rate(r, "by_kind", k, "corrected"))
-        for kind in Kind
-    },
-    "corrected_success_negation": ("after a negation", lambda r: _rate(r, "by_negation", "with_negation")),
+def _on_test(figure: Figure) -> Reported:
+    return Reported(figure.label, lambda test, agent: figure.read(test.get(agent, {})), figure.split)
+
+
+def _on_correction_test(figure: Figure) -> Reported:
+    def read(test: dict[str, Any], agent: str) -> tuple[int, float | None]:
+        return figure.read(test.get(CORRECTION_TEST, {}).get(agent, {}))
+
+    return Reported(f"correction test: {figure.label}", read, figure.split)
+
+
+_SPOKEN = [figure for figure in FIGURES if figure.name.startswith("corrected_")]
+"""The figures of episodes in which a correction was spoken: all of them, per kind and per form. The rates
+of all episodes set up with a kind, which mix episodes with and without one, are not aggregated."""
+
+METRICS: dict[str, Reported] = {
+    **{name: _on_test(FIGURE[name]) for name in ("success", "correction_episode_success")},
+    **{figure.name: _on_test(figure) for figure in _SPOKEN},
+    **{f"{CORRECTION_TEST}_{figure.name}": _on_correction_test(figure) for figure in _SPOKEN},
 }
-"""The test figures reported, by their names in ``metrics.csv``: label, and how to read it from a
-``test.json`` record (None where the run had no such episode)."""
+"""The test figures reported, by their names in ``metrics.csv`` (those of the last stage's correction test
+prefixed ``correction_test_``); a run without the figure (no such episode) does not count for it."""
 
 
 class ReportError(ValueError):
@@ -79,7 +90,8 @@ class StageOutcome:
     name: str
     steps: int
     promoted: bool
-    figures: dict[str, float | None]
+    figures: dict[str, tuple[int, float | None]]
+    """Metric -> (episodes, success) of the stage's agent."""
 
 
 @dataclass(frozen=True)
@@ -108,8 +120,8 @@ def read_outcome(run: Path, agent: str = "last") -> RunOutcome:
     for result in results:
         index = int(result["index"])
         test = run / stage_folder(index, names[index]) / TEST
-        record = json.loads(test.read_text()).get(agent, {}) if test.is_file() else {}
-        figures = {name: (read(record) if record else None) for name, (_, read) in METRICS.items()}
+        record = json.loads(test.read_text()) if test.is_file() else {}
+        figures = {name: reported.read(record, agent) for name, reported in METRICS.items()}
         steps = int(result["end"]) - int(result["start"])
         stages.append(StageOutcome(task, index, names[index], steps, result["ended"] == "promoted", figures))
     return RunOutcome(run, run_ended(run), stages)
@@ -122,18 +134,26 @@ class Cell:
     values: list[float]
     mean: Estimate
     iqm: Estimate | None
+    fewest: int | None = None
+    """The fewest episodes behind one run's value (None for steps)."""
+    judged: bool = True
+    """False for a kind or form some run heard fewer than ``JUDGED`` spoken corrections of."""
 
     def to_dict(self) -> dict[str, Any]:
         data: dict[str, Any] = {"mean": self.mean.value, "ci": list(self.mean.ci), "runs": self.mean.runs, "values": self.values}
         if self.iqm is not None:
             data |= {"iqm": self.iqm.value, "iqm_ci": list(self.iqm.ci)}
+        if self.fewest is not None:
+            data |= {"fewest_episodes": self.fewest, "judged": self.judged}
         return data
 
 
-def _cell(values: list[float]) -> Cell | None:
+def _cell(values: list[float], episodes: list[int] | None = None, split: bool = False) -> Cell | None:
     if not values:
         return None
-    return Cell(values, bootstrap(values), bootstrap(values, iqm) if len(values) >= IQM_RUNS else None)
+    fewest = min(episodes) if episodes else None
+    judged = not split or fewest is None or fewest >= JUDGED
+    return Cell(values, bootstrap(values), bootstrap(values, iqm) if len(values) >= IQM_RUNS else None, fewest, judged)
 
 
 StageKey = tuple[str, int, str]
@@ -176,17 +196,23 @@ def make_report(paths: list[Path], agent: str = "last") -> Report:
         outcomes = [read_outcome(run, agent) for run in group.runs]
         report = GroupReport(group, outcomes)
         collected: dict[StageKey, dict[str, list[float]]] = {}
+        counts: dict[StageKey, dict[str, list[int]]] = {}
         for outcome in outcomes:
             for stage in outcome.stages:
                 key = (stage.task, stage.index, stage.name)
-                values = collected.setdefault(key, {})
+                values, episodes = collected.setdefault(key, {}), counts.setdefault(key, {})
                 values.setdefault(STEPS, []).append(float(stage.steps))
                 report.promoted[key] = report.promoted.get(key, 0) + stage.promoted
-                for name, value in stage.figures.items():
+                for name, (n, value) in stage.figures.items():
                     if value is not None:
                         values.setdefault(name, []).append(float(value))
+                        episodes.setdefault(name, []).append(n)
         for key, values in collected.items():
-            report.cells[key] = {name: cell for name, v in values.items() if (cell := _cell(v)) is not None}
+            report.cells[key] = {
+                name: cell
+                for name, v in values.items()
+                if (cell := _cell(v, counts[key].get(name), name in METRICS and METRICS[name].split)) is not None
+            }
         reports.append(report)
     comparisons = {}
     if reports:
@@ -259,6 +285,8 @@ def _row(report: Report, key: StageKey, metric: str, label: str, use_iqm: bool) 
                 text += f" ({estimate.runs})"
             if metric == STEPS and not use_iqm:
                 text += f", {group.promoted.get(key, 0)} promoted"
+            if cell is not None and not cell.judged:
+                text += "*"
         cells.append(text)
         if number:
             comparison = None if use_iqm else report.comparisons.get((key, metric, number))
@@ -289,7 +317,7 @@ def to_markdown(report: Report) -> str:
             f"P(beats {reference}): the probability that a run of the group to its left beats one of {reference} "
             "(higher success, fewer steps), with its interval.",
         ]
-    labels = {STEPS: "steps in stage"} | {metric: label for metric, (label, _) in METRICS.items()}
+    labels = {STEPS: "steps in stage"} | {metric: reported.label for metric, reported in METRICS.items()}
     for key in report.stages:
         header = ["figure"]
         for number, group in enumerate(report.groups):
@@ -302,4 +330,9 @@ def to_markdown(report: Report) -> str:
                 row = _row(report, key, metric, label, use_iqm)
                 if row is not None:
                     lines.append("| " + " | ".join(row) + " |")
+    if any(not cell.judged for group in report.groups for cells in group.cells.values() for cell in cells.values()):
+        lines += [
+            "",
+            f"\\* Some run heard fewer than {JUDGED} spoken corrections of this kind or form: shown, not judged.",
+        ]
     return "\n".join(lines) + "\n"

@@ -6,9 +6,11 @@ rule is checked on the episodes of its last ``patience`` evaluations pooled (the
 lower end of its 95% interval); the stage ends when it holds or when the budget is spent, and then the
 next stage begins with the same agent and replay buffer, or, for ``on_budget: stop``, the run ends. When a
 stage ends, its ``last`` and ``best`` agents are measured on the stage's test episodes, which nothing in
-the run selects on; ``report.md`` quotes those figures. A checkpoint follows every evaluation and every
-interruption, so a resumed run repeats nothing and skips nothing: it ends with the same stages, step
-counts and, on CPU, the same numbers as a run that was never stopped.
+the run selects on; ``report.md`` quotes those figures. The last stage's agents are also measured by the
+correction test (:func:`lanrocli.train.testset.correction_test`): correction episodes of their own, until
+enough corrections and negations were spoken to judge each kind and form. A checkpoint follows every
+evaluation and every interruption, so a resumed run repeats nothing and skips nothing: it ends with the
+same stages, step counts and, on CPU, the same numbers as a run that was never stopped.
 
 Every state a kill, a full disk or a damaged file can leave continues with one of two commands: a folder
 holding no checkpoint yet is started over by either a fresh start or ``--resume``; a damaged newest
@@ -37,6 +39,7 @@ from lanrocli.train.runfolder import (
     AGENT_METRICS,
     BEST,
     CONFIG,
+    CORRECTION_TEST,
     LANGUAGE,
     LAST,
     LATEST,
@@ -48,6 +51,7 @@ from lanrocli.train.runfolder import (
     RunError,
     RunLock,
     TensorBoard,
+    align_metrics,
     append_metrics,
     best_checkpoint,
     checkpoint_steps,
@@ -66,7 +70,7 @@ from lanrocli.train.runfolder import (
     write_text,
 )
 from lanrocli.train.seeds import evaluation_seed
-from lanrocli.train.testset import measure
+from lanrocli.train.testset import CORRECTION_QUOTA, correction_test, measure
 from lanrocli.train.trainer import Trainer, TrainSettings
 
 Loaded = TypeVar("Loaded")
@@ -316,7 +320,8 @@ class CurriculumRun:
 
     def _test(self, result: StageResult) -> None:
         """The stage's last and best agents on its held-out test episodes, read back from their
-        checkpoints; the final agent of the run also with a blank and another object's sentence."""
+        checkpoints; the final agent of the run also with a blank and another object's sentence, and the last
+        stage's agents on the correction test, sized like the test (``CorrectionQuota.scaled``)."""
         stage = self.curriculum.stages[result.index]
         folder = self.out / stage_folder(result.index, stage.name)
         episodes = self.curriculum.test.episodes
@@ -329,6 +334,12 @@ class CurriculumRun:
             record[LANGUAGE] = {
                 shown.value: measure(folder / LAST, episodes, device, plain, instruction=shown).record
                 for shown in Instruction
+            }
+            quota = CORRECTION_QUOTA.scaled(episodes)
+            record[CORRECTION_TEST] = {
+                name: correction_test(folder / name, quota, device).record
+                for name in (LAST, BEST)
+                if (folder / name).is_file()
             }
         write_json(folder / TEST, record)
         write_report(self.out, self.curriculum, self.state)
@@ -476,6 +487,12 @@ def _restore_files(out: Path, directory: Path, extra: dict[str, Any], notes: lis
         write_text(out / METRICS, copies[METRICS])
     else:
         truncate_metrics(out / METRICS, checkpoint_steps(directory) or 0)
+    gained = align_metrics(out / METRICS)
+    if gained:
+        notes.append(
+            f"{out / METRICS} was written by an older version: rewritten with {len(gained)} new column(s) "
+            f"({', '.join(gained)}), empty in its earlier rows"
+        )
     try:
         return load_curriculum(out / CONFIG)
     except (CurriculumError, OSError) as error:

@@ -10,6 +10,7 @@ The run folder holds everything a researcher looks at or resumes from::
     stage-K-NAME/best-N/         the agent of the stage's best evaluation (agent and state only)
     stage-K-NAME/last, best      pointers to the newest step-N and to best-N
     stage-K-NAME/test.json       the stage's last and best agents on its held-out test episodes
+                                 (the last stage's also on the correction test)
     events.*                     TensorBoard scalars, when the tensorboard package is installed
     .lock                        locked by the process that writes the run (names it)
     set-aside/                   checkpoints newer than the one a run resumed from after damage
@@ -41,7 +42,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from lanrocli.choices import Kind
-from lanrocli.envs.evaluation import METRIC_NAMES
+from lanrocli.envs.evaluation import ATTENTION, FIGURES, JUDGED, METRIC_NAMES, PHASES
 
 if TYPE_CHECKING:
     from lanrocli.train.curriculum import Curriculum
@@ -56,6 +57,8 @@ LAST = "last"
 LATEST = "latest"
 LANGUAGE = "language"
 """Key of ``test.json`` under which the last stage's final agent is measured with each ``Instruction``."""
+CORRECTION_TEST = "correction_test"
+"""Key of ``test.json`` under which the last stage's agents are measured by the correction test."""
 TMP_PREFIX = ".tmp-"
 LOCK = ".lock"
 SET_ASIDE = "set-aside"
@@ -327,10 +330,54 @@ def lock_holder(out: Path) -> str | None:
 # -- metrics.csv -------------------------------------------------------------------------------------------
 
 
+def metric_columns(header: list[str]) -> list[str]:
+    """The columns of a ``metrics.csv`` whose header is ``header``: this version's, then those that only an
+    older version wrote (kept, so no figure of an older run is lost)."""
+    return [*METRIC_COLUMNS, *(column for column in header if column not in METRIC_COLUMNS)]
+
+
+def _header(path: Path) -> list[str]:
+    with open(path, newline="") as f:
+        return next(csv.reader(f), [])
+
+
+def _read_metrics(path: Path) -> tuple[list[str], list[dict[str, str]]]:
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        return list(reader.fieldnames or []), list(reader)
+
+
+def _write_metrics(path: Path, columns: list[str], rows: list[dict[str, Any]]) -> None:
+    """Replace ``path`` whole; a value missing from a row is left empty, as a figure without episodes is."""
+    tmp = temporary(path)
+    with open(tmp, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=columns, restval="")
+        writer.writeheader()
+        writer.writerows(rows)
+    tmp.replace(path)
+
+
+def align_metrics(path: Path) -> list[str]:
+    """Give an existing ``metrics.csv`` this version's columns, returning those it gained (empty in its
+    older rows). A run written by an older version and resumed by this one would otherwise append rows
+    longer than their header, which no reader can parse."""
+    if not path.is_file() or path.stat().st_size == 0:
+        return []
+    header = _header(path)
+    columns = metric_columns(header)
+    if header == columns:
+        return []
+    _write_metrics(path, columns, _read_metrics(path)[1])
+    return [column for column in columns if column not in header]
+
+
 def append_metrics(path: Path, row: dict[str, Any]) -> None:
-    new = not path.exists()
+    """Append an evaluation's row, first giving a file of an older version this version's columns."""
+    align_metrics(path)
+    new = not path.is_file() or path.stat().st_size == 0
+    header = METRIC_COLUMNS if new else _header(path)
     with open(path, "a", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=METRIC_COLUMNS)
+        writer = csv.DictWriter(f, fieldnames=header, restval="")
         if new:
             writer.writeheader()
         writer.writerow(row)
@@ -340,17 +387,10 @@ def truncate_metrics(path: Path, env_steps: int) -> None:
     """Drop rows written after the checkpoint a run resumes from: the resumed run writes them again."""
     if not path.is_file():
         return
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
+    header, rows = _read_metrics(path)
     kept = [r for r in rows if int(r["env_steps"]) <= env_steps]
-    if len(kept) == len(rows):
-        return
-    tmp = temporary(path)
-    with open(tmp, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=METRIC_COLUMNS)
-        writer.writeheader()
-        writer.writerows(kept)
-    tmp.replace(path)
+    if len(kept) < len(rows):
+        _write_metrics(path, header, kept)
 
 
 class TensorBoard:
@@ -476,7 +516,63 @@ def _test_lines(tests: dict[int, tuple[str, dict[str, Any]]]) -> list[str]:
         for shown, r in language.items():
             overall = {"episodes": r["episodes"], "success": r["success"], "ci": r["success_ci"]}
             lines.append(f"| {shown} | {_with_interval(overall)} |")
+    corrections = next(
+        (record[CORRECTION_TEST] for _, record in reversed(tests.values()) if CORRECTION_TEST in record), None
+    )
+    if corrections:
+        lines += correction_test_lines(corrections)
     return lines
+
+
+def correction_test_lines(records: dict[str, dict[str, Any]]) -> list[str]:
+    """The section of ``report.md`` on the correction test of the final stage's agents (``records`` by agent)."""
+    split = [figure for figure in FIGURES if figure.split]
+    quota = next(iter(records.values()))["quota"]
+    negations = f" and {quota['negations']} negations" if quota["negations"] else ""
+    lines = [
+        "",
+        "## Correction test: the final stage's agents on correction episodes",
+        "",
+        "Every episode a correction episode (half the spoken corrections negations, where the stage has them), "
+        f"run until {quota['spoken']} corrections{negations} were spoken, or for {quota['episodes']} episodes; "
+        "episodes of their own, apart from the test's. Success where a correction was spoken, with 95% Wilson "
+        f"interval (spoken); per kind and form: success (spoken), `*` where fewer than {JUDGED} were spoken: "
+        "shown, not judged.",
+        "",
+        "| agent | episodes | corrected | " + " | ".join(figure.label for figure in split) + " |",
+        "|---|---|---|" + "---|" * len(split),
+    ]
+    for agent, r in records.items():
+        cells = [_judged(*figure.read(r)) for figure in split]
+        met = "" if r["quota_met"] else ", quota not met"
+        lines.append(
+            f"| {agent} ({r['checkpoint'].split('/')[-1]}) | {r['episodes']}{met} | {_with_interval(r['corrected'])} | "
+            + " | ".join(cells) + " |"
+        )
+    attention = {agent: r[ATTENTION] for agent, r in records.items() if r.get(ATTENTION)}
+    if attention:
+        lines += [
+            "",
+            "Share of the actor's attention on the goal object, mean over steps: before any correction (plain), "
+            "and after a correction of each form.",
+            "",
+            "| agent | " + " | ".join(PHASES) + " |",
+            "|---|" + "---|" * len(PHASES),
+        ]
+        for agent, shares in attention.items():
+            lines.append(f"| {agent} | " + " | ".join(_share(shares.get(phase)) for phase in PHASES) + " |")
+    return lines
+
+
+def _judged(episodes: int, success: float | None) -> str:
+    """A kind's or form's success as ``75% (40)``, marked ``*`` on too few spoken corrections to judge it."""
+    if not episodes or success is None:
+        return "-"
+    return f"{100 * success:.0f}% ({episodes}){'*' if episodes < JUDGED else ''}"
+
+
+def _share(value: float | None) -> str:
+    return "-" if value is None else f"{value:.2f}"
 
 
 def _test_rows(index: int, name: str, record: dict[str, Any]) -> list[str]:

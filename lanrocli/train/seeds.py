@@ -1,11 +1,13 @@
-"""Seeds of the three kinds of episodes a run meets, kept apart by construction.
+"""Seeds of the kinds of episodes a run meets, kept apart by construction.
 
 Training environments are seeded once with 32-bit seeds (``TrainSettings.env_seed`` and the next few) and
 run on from there. Evaluation and test episodes are reset one by one with seeds that carry their purpose,
 the run's seed, the stage and a block number in separate 32-bit fields above the first 32 bits, so no
 evaluation episode is a training or test episode, whatever the run's seed or the number of episodes.
 Evaluation draws a new block for every evaluation (fresh episodes, yet the same ones when a resumed run
-repeats that evaluation); the test set is block 0 of its stage and never changes.
+repeats that evaluation); the test set is block 0 of its stage and never changes. The correction test
+(every episode a correction episode, as many as it takes to hear enough corrections) has a purpose of its
+own, so its episodes are none of the ordinary test's either.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ FIELD = 1 << 32
 class Purpose(IntEnum):
     EVALUATION = 1
     TEST = 2
+    CORRECTION_TEST = 3
 
 
 def first_seed(purpose: Purpose, run_seed: int, stage: int, block: int = 0) -> int:
@@ -37,3 +40,8 @@ def evaluation_seed(run_seed: int, stage: int, evaluation: int) -> int:
 def held_out_seed(run_seed: int, stage: int) -> int:
     """First seed of a stage's held-out test episodes."""
     return first_seed(Purpose.TEST, run_seed, stage)
+
+
+def correction_test_seed(run_seed: int, stage: int) -> int:
+    """First seed of a stage's held-out correction-test episodes."""
+    return first_seed(Purpose.CORRECTION_TEST, run_seed, stage)

@@ -3,25 +3,62 @@
 The run measures the ``last`` and ``best`` agents of every stage here when the stage ends, and ``lanro eval``
 measures any checkpoint here, so the two give the same record for the same checkpoint and episodes: the
 record is what ``test.json`` holds and what ``lanro eval --json`` prints.
+
+The ordinary test holds few spoken corrections (about one episode in five, fewer of each kind and form), too
+few to judge how an agent follows each. The correction test makes every episode a correction episode, half
+of the spoken corrections negations where the stage has them, and runs held-out episodes of its own until
+enough corrections and negations were spoken (``CorrectionQuota``).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import torch
 
-from lanrocli.choices import Instruction
+from lanrocli.choices import CorrectionForm, Instruction
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.evaluation import EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.checkpoint import resolve_checkpoint
-from lanrocli.train.seeds import held_out_seed
-from lanrocli.train.trainer import TrainSettings, load_policy
+from lanrocli.train.seeds import correction_test_seed, held_out_seed
+from lanrocli.train.trainer import AgentPolicy, TrainSettings, load_policy
 
+CORRECTION_TEST_NEGATION_RATE = 0.5
+"""Share of the correction test's spoken corrections that are negations, where the stage allows them."""
+
+
+@dataclass(frozen=True)
+class CorrectionQuota:
+    """When the correction test stops: once ``spoken`` episodes had a spoken correction and, where
+    negations are on, ``negations`` of them a negation; or after ``episodes`` episodes whatever was heard,
+    so that an agent that never errs, and so is never corrected, still ends."""
+
+    spoken: int
+    negations: int
+    episodes: int
+
+    def met(self, report: EvaluationReport, negations: bool) -> bool:
+        heard = report.by_form()[CorrectionForm.NEGATION].episodes
+        return report.corrected.episodes >= self.spoken and (not negations or heard >= self.negations)
+
+    def scaled(self, test_episodes: int) -> CorrectionQuota:
+        """This quota for a run whose ordinary test has ``test_episodes`` episodes instead of
+        ``QUOTA_TEST_EPISODES``: a run that tests on few episodes (a quick run, a test's) spends as little here."""
+        factor = test_episodes / QUOTA_TEST_EPISODES
+        return CorrectionQuota(*(max(1, math.ceil(n * factor)) for n in (self.spoken, self.negations, self.episodes)))
+
+
+CORRECTION_QUOTA = CorrectionQuota(spoken=300, negations=150, episodes=3000)
+"""The correction test's quota for a run tested on ``QUOTA_TEST_EPISODES`` episodes, and for ``lanro eval
+--correction-test``: at least 300 spoken corrections put a 95% interval within about 6 points either side."""
+
+QUOTA_TEST_EPISODES = 500
+"""The ordinary test's size for which ``CORRECTION_QUOTA`` is written (the curricula's default)."""
 
 @dataclass(frozen=True)
 class Measurement:
@@ -40,6 +77,63 @@ def checkpoint_name(directory: Path) -> str:
     return f"{directory.parent.name}/{directory.name}"
 
 
+@dataclass(frozen=True)
+class _Loaded:
+    """A checkpoint's deterministic policy and the environment settings it is to be measured on."""
+
+    directory: Path
+    settings: TrainSettings
+    policy: AgentPolicy
+    env: EnvSettings
+
+
+def _load(
+    path: Path,
+    device: str | torch.device,
+    changes: Callable[[EnvSettings], Mapping[str, Any]],
+    check: Callable[[TrainSettings, EnvSettings], None] | None,
+) -> _Loaded:
+    """Load the checkpoint at ``path``; its stage's settings as evaluation sees them (neutral starts) are
+    changed by what ``changes`` makes of them, and ``check`` may refuse the result before anything runs."""
+    directory = resolve_checkpoint(path)
+    settings, policy = load_policy(directory, device)
+    stage = settings.env.for_evaluation()
+    env_settings = stage.replace(**changes(stage))
+    if check is not None:
+        check(settings, env_settings)
+    return _Loaded(directory, settings, policy, env_settings)
+
+
+def _run(
+    loaded: _Loaded,
+    episodes: int,
+    first: int,
+    instruction: Instruction = Instruction.TRUE,
+    gif: Path | None = None,
+    progress: Callable[[int], None] | None = None,
+    enough: Callable[[EvaluationReport], bool] | None = None,
+) -> EvaluationReport:
+    settings = loaded.settings
+    env = LanroEnv(settings.task, loaded.env, object_slots=settings.slots, render_mode="rgb_array" if gif else None)
+    try:
+        return evaluate(env, loaded.policy, episodes, first, gif, progress, instruction, enough)
+    finally:
+        env.close()
+
+
+def _record(
+    loaded: _Loaded, episodes_from: dict[str, Any], instruction: Instruction, report: EvaluationReport
+) -> dict[str, Any]:
+    return {
+        "checkpoint": checkpoint_name(loaded.directory),
+        "task": loaded.settings.task,
+        "env": loaded.env.to_dict(),
+        "episodes_from": episodes_from,
+        "instruction": instruction.value,
+        **report.as_dict(),
+    }
+
+
 def measure(
     path: Path,
     episodes: int,
@@ -54,27 +148,50 @@ def measure(
     """Run the deterministic policy of the checkpoint at ``path`` (a checkpoint, pointer or run folder).
 
     The environment is the checkpoint's stage as evaluation sees it (neutral starts), changed by
-    ``overrides`` (fields of ``EnvSettings``); the episodes are the stage's test episodes unless ``seed`` asks for others (episode i
-    then uses ``seed + i``). ``check`` may refuse the resolved settings (raise) before anything runs.
+    ``overrides`` (fields of ``EnvSettings``); the episodes are the stage's test episodes unless ``seed`` asks
+    for others (episode i then uses ``seed + i``). ``check`` may refuse the resolved settings (raise) before
+    anything runs.
     """
-    directory = resolve_checkpoint(path)
-    settings, policy = load_policy(directory, device)
-    env_settings = settings.env.for_evaluation().replace(**(overrides or {}))
-    if check is not None:
-        check(settings, env_settings)
+    loaded = _load(path, device, lambda _: overrides or {}, check)
     held_out = seed is None
-    first = held_out_seed(settings.seed, settings.stage) if seed is None else seed
-    env = LanroEnv(settings.task, env_settings, object_slots=settings.slots, render_mode="rgb_array" if gif else None)
-    try:
-        report = evaluate(env, policy, episodes, first, gif, progress, instruction)
-    finally:
-        env.close()
+    first = held_out_seed(loaded.settings.seed, loaded.settings.stage) if seed is None else seed
+    report = _run(loaded, episodes, first, instruction, gif, progress)
+    record = _record(loaded, {"test_set": held_out, "first_seed": first}, instruction, report)
+    return Measurement(loaded.settings, loaded.env, first, held_out, report, record)
+
+
+def _correction_settings(overrides: Mapping[str, Any]) -> Callable[[EnvSettings], dict[str, Any]]:
+    """The correction test's changes to a stage: every episode a correction episode, half the spoken
+    corrections negations where the stage allows them; ``overrides`` change them in turn."""
+
+    def changes(stage: EnvSettings) -> dict[str, Any]:
+        negations = {"negation_rate": CORRECTION_TEST_NEGATION_RATE} if stage.negations else {}
+        return {"correction_rate": 1.0, **negations, **overrides}
+
+    return changes
+
+
+def correction_test(
+    path: Path,
+    quota: CorrectionQuota = CORRECTION_QUOTA,
+    device: str | torch.device = "cpu",
+    overrides: Mapping[str, Any] | None = None,
+    progress: Callable[[int], None] | None = None,
+    check: Callable[[TrainSettings, EnvSettings], None] | None = None,
+) -> Measurement:
+    """The checkpoint at ``path`` on its stage's correction-test episodes until ``quota`` is met.
+
+    The episodes come from a seed stream of their own (``correction_test_seed``), so none is an episode of
+    training, evaluation or the ordinary test; they and the quota fix where it stops, so the same checkpoint
+    always gives the same record. The record is ``measure``'s with ``quota`` and whether it was met.
+    """
+    loaded = _load(path, device, _correction_settings(overrides or {}), check)
+    first = correction_test_seed(loaded.settings.seed, loaded.settings.stage)
+    negations = loaded.env.negations
+    report = _run(loaded, quota.episodes, first, progress=progress, enough=lambda r: quota.met(r, negations))
     record = {
-        "checkpoint": checkpoint_name(directory),
-        "task": settings.task,
-        "env": env_settings.to_dict(),
-        "episodes_from": {"test_set": held_out, "first_seed": first},
-        "instruction": instruction.value,
-        **report.as_dict(),
+        **_record(loaded, {"correction_test": True, "first_seed": first}, Instruction.TRUE, report),
+        "quota": {**asdict(quota), "negations": quota.negations if negations else 0},
+        "quota_met": quota.met(report, negations),
     }
-    return Measurement(settings, env_settings, first, held_out, report, record)
+    return Measurement(loaded.settings, loaded.env, first, True, report, record)

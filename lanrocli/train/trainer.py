@@ -133,6 +133,11 @@ class AgentPolicy:
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> np.ndarray:
         return self.agent.act(observation, deterministic=True)
 
+    def attention(self, observation: dict[str, np.ndarray]) -> np.ndarray | None:
+        """The actor's attention over the object slots for one observation, which evaluation reads to tell
+        how much of it lies on the goal; None for a flat agent."""
+        return self.agent.attention(observation)
+
 
 def load_policy(path: Path, device: str | torch.device = "cpu") -> tuple[TrainSettings, AgentPolicy]:
     """The settings a checkpoint was trained with and its deterministic policy; ``path`` is a checkpoint,

@@ -83,6 +83,37 @@ def test_figures_per_stage_over_runs(runs: list[Path]) -> None:
     assert to_json(make_report(runs[:2], "best"))["groups"][0]["stages"][0]["metrics"]["success"]["mean"] == 1.0
 
 
+def add_correction_test(run: Path, negation: float, negations: int) -> None:
+    """The last stage's correction test, as the run's final test writes it, with ``negations`` spoken negations."""
+    test = next(run.glob("stage-*")) / TEST
+    tested = json.loads(test.read_text())
+    spoken = {**record(0.9, 0.6), "by_form": {"excuse": rate(300, 0.7), "negation": rate(negations, negation),
+                                              "edit": rate(0, None)}}
+    tested["correction_test"] = {"last": spoken, "best": spoken}
+    test.write_text(json.dumps(tested))
+
+
+def test_the_correction_test_is_aggregated_per_form_and_marks_what_is_not_judged(tmp_path: Path) -> None:
+    runs = [make_run(tmp_path / f"r{seed}", seed, [(40, True, 0.5, 0.5)]) for seed in (0, 1)]
+    add_correction_test(runs[0], 0.4, 150)
+    add_correction_test(runs[1], 0.6, 20)
+    report = make_report(runs)
+    cells = report.groups[0].cells[("reach", 0, "first")]
+    negation = cells["correction_test_corrected_success_negation"]
+    assert negation.values == [0.4, 0.6] and negation.mean.value == pytest.approx(0.5)
+    assert negation.fewest == 20 and not negation.judged  # one run heard only 20
+    assert cells["correction_test_corrected_success_excuse"].judged
+    assert "correction_test_corrected_success_edit" not in cells  # no run heard an edit
+    assert cells["corrected_success_ambiguity"].fewest == 5 and not cells["corrected_success_ambiguity"].judged
+    assert cells["success"].judged  # not a kind or a form: never marked
+    metrics = to_json(report)["groups"][0]["stages"][0]["metrics"]
+    assert metrics["correction_test_corrected_success_negation"]["judged"] is False
+    text = to_markdown(report)
+    assert "| correction test: after a negation | 50.0 [40.0, 60.0]* |" in text
+    assert "| correction test: after an excuse | 70.0 [70.0, 70.0] |" in text
+    assert "\\* Some run heard fewer than 30" in text
+
+
 def test_settings_are_grouped_and_compared(runs: list[Path]) -> None:
     groups = group_runs(runs)
     assert [g.label for g in groups] == ["agent.critics=1", "agent.critics=2"]

@@ -73,6 +73,7 @@ def test_env_section_is_the_environments_settings() -> None:
         "mode": "colour",
         "correction_rate": 0.5,
         "negations": False,
+        "negation_rate": None,
         "max_delay": 0,
         "rare_words": False,
         "kinds": ["ambiguity"],

@@ -10,12 +10,23 @@ from pathlib import Path
 
 import pytest
 
+from lanrocli.choices import CorrectionForm
 from lanrocli.envs.evaluation import EpisodeResult, EvaluationReport, wilson_interval
 from lanrocli.train.checkpoint import resolve_checkpoint
 from lanrocli.train.curriculum import Curriculum, load_curriculum
-from lanrocli.train.pipeline import CurriculumRun, RunError
-from lanrocli.train.runfolder import CONFIG, REPORT, read_pointer, step_checkpoint
-from lanrocli.train.seeds import evaluation_seed, held_out_seed
+from lanrocli.train.pipeline import CurriculumRun, RunError, _restore_files
+from lanrocli.train.runfolder import (
+    CONFIG,
+    CORRECTION_TEST,
+    METRIC_COLUMNS,
+    METRICS,
+    REPORT,
+    TEST,
+    read_pointer,
+    step_checkpoint,
+)
+from lanrocli.train.seeds import correction_test_seed, evaluation_seed, held_out_seed
+from lanrocli.train.testset import CORRECTION_QUOTA, correction_test
 
 from .runs import Baseline, outcome, rows, tiny, train, wait_for_rows
 
@@ -24,8 +35,8 @@ def report(successes: list[bool], corrected: list[bool] | None = None) -> Evalua
     corrected = corrected or [False] * len(successes)
     return EvaluationReport(
         [
-            EpisodeResult(success=s, length=5, challenge="wrong_object" if c else None, corrected=c, negation=False,
-                          returned=-4.0)
+            EpisodeResult(success=s, length=5, challenge="wrong_object" if c else None,
+                          form=CorrectionForm.EXCUSE if c else None, returned=-4.0)
             for s, c in zip(successes, corrected)
         ]
     )
@@ -144,6 +155,40 @@ def test_the_run_folder_has_every_file(straight: Baseline) -> None:
         assert tested["last"]["episodes_from"]["first_seed"] == held_out_seed(5, index - 1)
         assert f"| {index}. {name} | last ({read_pointer(out / f'stage-{index}-{name}' / 'last').name})" in table
     assert set(tested["language"]) == {"true", "blank", "other"}
+    assert set(tested[CORRECTION_TEST]) == {"last", "best"} and "## Correction test" in table
+
+
+def test_the_last_stage_ends_with_a_correction_test_of_both_agents(tmp_path: Path) -> None:
+    data = load_curriculum(tiny(tmp_path)).model_dump()
+    data["stages"] = [data["stages"][2]]  # corrections and negations
+    run = CurriculumRun.start(Curriculum.model_validate(data), tmp_path / "run")
+    scripted(run, iter([report([False, False])] * 2))
+    assert run.run()
+    run.close()
+    tested = json.loads((tmp_path / "run" / "stage-1-third" / TEST).read_text())
+    corrections = tested[CORRECTION_TEST]
+    assert set(corrections) == {"last", "best"}
+    quota = CORRECTION_QUOTA.scaled(2)  # sized like the test's two episodes
+    for record in corrections.values():
+        assert record["episodes_from"] == {"correction_test": True, "first_seed": correction_test_seed(5, 0)}
+        assert record["env"]["correction_rate"] == 1.0 and record["env"]["negation_rate"] == 0.5
+        assert record["quota"] == {"spoken": quota.spoken, "negations": quota.negations, "episodes": quota.episodes}
+        assert record["episodes"] == quota.episodes or record["quota_met"]
+    assert correction_test(tmp_path / "run" / "stage-1-third" / "last", quota).record == corrections["last"]
+    assert "## Correction test" in (tmp_path / "run" / REPORT).read_text()
+
+
+def test_resuming_a_run_of_an_older_version_gives_metrics_csv_the_new_columns(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    out.mkdir()
+    config = tiny(tmp_path).read_text()
+    (out / CONFIG).write_text(config)
+    old = "stage,stage_name,env_steps,success\n1,first,40,0.5\n"
+    notes: list[str] = []
+    _restore_files(out, out / "stage-1-first" / step_checkpoint(40), {"files": {CONFIG: config, METRICS: old}}, notes)
+    (note,) = notes
+    assert "older version" in note and "corrected_success_edit" in note
+    assert [r["success"] for r in rows(out)] == ["0.5"] and list(rows(out)[0]) == list(METRIC_COLUMNS)
 
 
 def test_starting_into_a_used_folder_is_refused(tmp_path: Path) -> None:

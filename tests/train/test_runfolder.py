@@ -11,7 +11,10 @@ from lanrocli.train.runfolder import (
     LAST,
     LATEST,
     METRIC_COLUMNS,
+    METRICS,
+    align_metrics,
     append_metrics,
+    correction_test_lines,
     publish,
     read_pointer,
     truncate_metrics,
@@ -56,3 +59,55 @@ def test_json_is_replaced_whole(tmp_path: Path) -> None:
     write_json(path, {"last": 1})
     write_json(path, {"last": 2})
     assert json.loads(path.read_text()) == {"last": 2} and [p.name for p in tmp_path.iterdir()] == ["test.json"]
+
+
+def test_a_metrics_file_of_an_older_version_gains_the_new_columns_and_still_plots(tmp_path: Path) -> None:
+    from lanrocli.train.plot import read_run
+
+    # An older version wrote fewer columns, one of them ("correction_success") no longer written.
+    old = ["stage", "stage_name", "env_steps", "success", "correction_success", "corrected_episodes_negation"]
+    path = tmp_path / METRICS
+    path.write_text(",".join(old) + "\n1,first,40,0.5,0.25,3\n")
+    append_metrics(path, {"stage": 1, "stage_name": "first", "env_steps": 80, "success": 0.75, "corrected_success": 1.0})
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        rows = list(reader)
+        assert list(reader.fieldnames or ()) == [*METRIC_COLUMNS, "correction_success"]
+    assert [r["success"] for r in rows] == ["0.5", "0.75"]
+    assert (rows[0]["correction_success"], rows[0]["corrected_episodes_negation"], rows[0]["corrected_success"]) == ("0.25", "3", "")
+    assert rows[1]["corrected_success"] == "1.0"
+    assert read_run(tmp_path).steps.tolist() == [40, 80]
+    assert align_metrics(path) == []  # once aligned, the file is left alone
+
+
+def test_aligning_names_the_columns_gained(tmp_path: Path) -> None:
+    path = tmp_path / METRICS
+    path.write_text(",".join(c for c in METRIC_COLUMNS if not c.endswith("_edit")) + "\n")
+    assert align_metrics(path) == ["corrected_episodes_edit", "corrected_success_edit", "attention_on_goal_edit"]
+    assert align_metrics(tmp_path / "none.csv") == []
+
+
+def correction_record(agent: str, spoken: int, negations: int) -> dict:
+    rate = lambda n, s: {"episodes": n, "success": s, "ci": [0.0, 1.0]}  # noqa: E731
+    return {
+        "checkpoint": f"stage-3-third/{agent}-0000000240", "episodes": 400, "quota_met": True,
+        "quota": {"spoken": 300, "negations": 150, "episodes": 3000},
+        "corrected": rate(spoken, 0.5),
+        "by_kind": {"ambiguity": {**rate(200, 0.4), "corrected": rate(spoken - 20, 0.5)},
+                    "common_ground": {**rate(30, 0.4), "corrected": rate(20, 0.25)}},
+        "by_form": {"excuse": rate(spoken - negations, 0.6), "negation": rate(negations, 0.4), "edit": rate(0, None)},
+        "attention_on_goal": {"plain": 0.5, "excuse": 0.75, "negation": None, "edit": None},
+    }
+
+
+def test_report_md_shows_the_correction_test_and_marks_what_is_not_judged() -> None:
+    lines = correction_test_lines({"last": correction_record("step", 300, 150)})
+    text = "\n".join(lines)
+    assert "## Correction test" in text and "until 300 corrections and 150 negations were spoken" in text
+    (header,) = [line for line in lines if line.startswith("| agent | episodes")]
+    row = next(line for line in lines if line.startswith("| last ("))
+    cells = dict(zip(*([cell.strip() for cell in line.strip("|").split("|")] for line in (header, row))))
+    assert cells["ambiguity"] == "50% (280)" and cells["common ground"] == "25% (20)*"
+    assert cells["after a negation"] == "40% (150)" and cells["after an edit"] == "-"
+    assert "| last | 0.50 | 0.75 | - | - |" in lines
+

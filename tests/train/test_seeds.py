@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from lanrocli.train.seeds import FIELD, Purpose, evaluation_seed, first_seed, held_out_seed
+from lanrocli.train.seeds import FIELD, Purpose, correction_test_seed, evaluation_seed, first_seed, held_out_seed
 from lanrocli.train.trainer import TrainSettings
 
 field = st.integers(0, FIELD - 1)
@@ -30,6 +30,12 @@ def test_different_blocks_never_share_a_seed(a: tuple, b: tuple) -> None:
 def test_the_test_set_is_not_any_evaluation() -> None:
     evaluations = {evaluation_seed(0, 0, k) + i for k in range(50) for i in range(100)}
     assert not evaluations & {held_out_seed(0, 0) + i for i in range(500)}
+
+
+def test_the_correction_test_meets_no_test_or_evaluation_episode() -> None:
+    corrections = {correction_test_seed(0, 0) + i for i in range(3000)}
+    assert not corrections & {held_out_seed(0, 0) + i for i in range(3000)}
+    assert not corrections & {evaluation_seed(0, 0, k) + i for k in range(50) for i in range(100)}
 
 
 def test_fields_out_of_range_are_refused() -> None:
