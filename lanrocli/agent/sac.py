@@ -174,11 +174,9 @@ class SACAgent:
         with torch.no_grad():
             next_action, next_log_prob = self.actor.sample(next_obs, next_actor_language, self.generator, next_present)
             next_q = self.target_critic(next_obs, next_target_language, next_action, next_present)
-            soft_value = next_q.min(dim=0).values - alpha * next_log_prob
+            target_q = reward + discount * not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
             # A lost episode (an object dropped) is worth what failing for ever is: -1 at every step to come.
-            failed = self._tensor(batch.failed, torch.float32)
-            lost = FAILURE_REWARD / (1.0 - s.gamma)
-            target_q = reward + discount * (not_done * soft_value + failed * lost)
+            target_q = target_q + discount * self._tensor(batch.failed, torch.float32) * (FAILURE_REWARD / (1.0 - s.gamma))
             if s.clip_target:
                 target_q = target_q.clamp(FAILURE_REWARD / (1.0 - s.gamma), SUCCESS_REWARD)
         # Object-wise readers weigh the objects once per network: the same attention serves the networks and
