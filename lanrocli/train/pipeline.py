@@ -70,7 +70,8 @@ from lanrocli.train.runfolder import (
     write_text,
 )
 from lanrocli.train.seeds import evaluation_seed
-from lanrocli.train.testset import CORRECTION_QUOTA, correction_test, measure
+from lanrocli.train.checkpoint import resolve_checkpoint
+from lanrocli.train.testset import CORRECTION_QUOTA, checkpoint_name, correction_test, measure
 from lanrocli.train.trainer import Trainer, TrainSettings
 
 Loaded = TypeVar("Loaded")
@@ -123,6 +124,23 @@ class RunState:
         results = [StageResult.from_dict(r) for r in data.get("results", [])]
         window = [(int(k), int(n)) for k, n in data.get("window", [])]
         return cls(**{**{k: v for k, v in data.items() if k in known}, "results": results, "window": window})
+
+
+def _once_per_agent(
+    folder: Path, names: list[str], measured: Callable[[Path], dict[str, Any]]
+) -> dict[str, dict[str, Any]]:
+    """``measured`` of each pointer of ``names`` in a stage's ``folder``, measured once per agent: ``best``
+    taken at the stage's last evaluation is the ``last`` agent (the same step, the same weights), and its
+    record is the other's under its own checkpoint name."""
+    records: dict[str, dict[str, Any]] = {}
+    by_step: dict[str, dict[str, Any]] = {}
+    for name in names:
+        directory = resolve_checkpoint(folder / name)
+        step = directory.name.rsplit("-", 1)[-1]
+        if step not in by_step:
+            by_step[step] = measured(directory)
+        records[name] = {**by_step[step], "checkpoint": checkpoint_name(directory)}
+    return records
 
 
 class RunObserver:
@@ -326,9 +344,8 @@ class CurriculumRun:
         folder = self.out / stage_folder(result.index, stage.name)
         episodes = self.curriculum.test.episodes
         device = self.trainer.device
-        record = {
-            name: measure(folder / name, episodes, device).record for name in (LAST, BEST) if (folder / name).is_file()
-        }
+        agents = [name for name in (LAST, BEST) if (folder / name).is_file()]
+        record = _once_per_agent(folder, agents, lambda path: measure(path, episodes, device).record)
         if self.state.finished and result is self.state.results[-1]:
             plain = {"correction_rate": 0.0}
             record[LANGUAGE] = {
@@ -336,11 +353,9 @@ class CurriculumRun:
                 for shown in Instruction
             }
             quota = CORRECTION_QUOTA.scaled(episodes)
-            record[CORRECTION_TEST] = {
-                name: correction_test(folder / name, quota, device).record
-                for name in (LAST, BEST)
-                if (folder / name).is_file()
-            }
+            record[CORRECTION_TEST] = _once_per_agent(
+                folder, agents, lambda path: correction_test(path, quota, device).record
+            )
         write_json(folder / TEST, record)
         write_report(self.out, self.curriculum, self.state)
 

@@ -12,9 +12,9 @@ import pytest
 
 from lanrocli.choices import CorrectionForm
 from lanrocli.envs.evaluation import EpisodeResult, EvaluationReport, wilson_interval
-from lanrocli.train.checkpoint import resolve_checkpoint
+from lanrocli.train.checkpoint import AGENT_FILE, resolve_checkpoint
 from lanrocli.train.curriculum import Curriculum, load_curriculum
-from lanrocli.train.pipeline import CurriculumRun, RunError, _restore_files
+from lanrocli.train.pipeline import CurriculumRun, RunError, _once_per_agent, _restore_files
 from lanrocli.train.runfolder import (
     CONFIG,
     CORRECTION_TEST,
@@ -24,6 +24,7 @@ from lanrocli.train.runfolder import (
     TEST,
     read_pointer,
     step_checkpoint,
+    write_pointer,
 )
 from lanrocli.train.seeds import correction_test_seed, evaluation_seed, held_out_seed
 from lanrocli.train.testset import CORRECTION_QUOTA, correction_test
@@ -230,3 +231,23 @@ def test_interrupted_runs_resume_to_the_same_result(tmp_path: Path, how: signal.
 
     assert outcome(tmp_path / "cut") == outcome(straight.out)
     assert [s[0] for s in outcome(tmp_path / "cut")[1]] == ["first", "second", "third"]
+
+
+def test_a_best_agent_that_is_the_last_one_is_measured_once(tmp_path: Path) -> None:
+    for name in ("step-0000000020", "best-0000000020", "best-0000000010"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / AGENT_FILE).write_bytes(b"")
+    calls: list[str] = []
+
+    def measured(path: Path) -> dict:
+        calls.append(path.name)
+        return {"checkpoint": path.name, "success": len(calls)}
+
+    write_pointer(tmp_path / "last", "step-0000000020")
+    write_pointer(tmp_path / "best", "best-0000000020")
+    records = _once_per_agent(tmp_path, ["last", "best"], measured)
+    assert calls == ["step-0000000020"] and records["last"]["success"] == records["best"]["success"] == 1
+    assert records["best"]["checkpoint"].endswith("best-0000000020")
+    write_pointer(tmp_path / "best", "best-0000000010")
+    records = _once_per_agent(tmp_path, ["last", "best"], measured)
+    assert calls[1:] == ["step-0000000020", "best-0000000010"] and records["best"]["success"] == 3
