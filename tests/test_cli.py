@@ -146,7 +146,12 @@ def test_quick_training_run_then_eval_plot_and_refusals(tmp_path) -> None:
 
     assert "## Test: held-out episodes" in report_text and "## Language check" in report_text
     tested = json.loads((out / "stage-3-negations" / "test.json").read_text())
-    assert set(tested) == {"last", "best", "language"} and set(tested["language"]) == {"true", "blank", "other"}
+    assert set(tested) == {"last", "best", "language", "correction_test"}
+    assert set(tested["language"]) == {"true", "blank", "other"} and set(tested["correction_test"]) == {"last", "best"}
+    assert "## Correction test" in report_text
+    corrections = runner.invoke(app, ["eval", str(out), "--correction-test", "--json"])
+    assert corrections.exit_code == 0, corrections.output
+    assert json.loads(corrections.output) == tested["correction_test"]["last"]  # the run's figures, again
 
     evaluated = runner.invoke(app, ["eval", str(out), "--json"])
     assert evaluated.exit_code == 0, evaluated.output
