@@ -81,13 +81,24 @@ def test_random_starts_are_for_training_only() -> None:
     evaluation.close()
 
 
+LEVERS = (
+    dataclasses.replace(
+        SETTINGS,
+        buffer=BufferSettings(size=5000, relabel_negations=True, fresh_targets=True, ground_real=True, falls_fail=True),
+    ),
+    SACSettings(batch_size=32, architecture="objects", sentence_in_trunk=False, see_rest=True),
+)
+"""The correction levers the curricula use, and the rest of them: they change what is stored and sampled."""
+
+
 @pytest.mark.slow
-def test_resume_continues_exactly(tmp_path: Path) -> None:
-    straight = Trainer(SETTINGS, AGENT)
+@pytest.mark.parametrize(("settings", "agent"), [(SETTINGS, AGENT), LEVERS], ids=["defaults", "levers"])
+def test_resume_continues_exactly(tmp_path: Path, settings: TrainSettings, agent: SACSettings) -> None:
+    straight = Trainer(settings, agent)
     straight.run(300)
     straight.close()
 
-    first = Trainer(SETTINGS, AGENT)
+    first = Trainer(settings, agent)
     first.run(150)  # stops mid-episode: push episodes with corrections last up to 100 steps
     first.save(tmp_path / "split", {"note": "kept"})
     first.close()
