@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -16,12 +17,17 @@ from .episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
 from .sentences import parse, referents
 
 
-def _filled(capacity: int, episodes: int, seed: int = 0) -> tuple[ReplayBuffer, dict[int, EpisodeData]]:
+def _filled(
+    capacity: int, episodes: int, seed: int = 0, edit: Callable[[int, EpisodeData], None] | None = None
+) -> tuple[ReplayBuffer, dict[int, EpisodeData]]:
+    """A buffer of random episodes; ``edit(i, episode)`` may change each before it is added."""
     rng = np.random.default_rng(seed)
     buffer = ReplayBuffer(capacity, OBS_DIM, ACTION_DIM, max_objects=3, seed=seed)
     added = {}
     for i in range(episodes):
         episode = random_episode(rng, i)
+        if edit is not None:
+            edit(i, episode)
         buffer.add_episode(episode)
         added[i] = episode
     return buffer, added
@@ -133,18 +139,15 @@ def test_corrected_relabels_negate_the_object_the_arm_acted_on_first() -> None:
 
 
 def test_ground_real_labels_goals_only_where_the_sentence_names_them() -> None:
-    rng = np.random.default_rng(6)
-    buffer = ReplayBuffer(5000, OBS_DIM, ACTION_DIM, max_objects=3, seed=6)
-    added = {}
-    for i in range(200):
-        episode = random_episode(rng, i)
+    def correct_halfway(i: int, episode: EpisodeData) -> None:
         if i % 2 and len(episode) > 2:  # a correction episode whose correction is spoken halfway
             episode.correction_episode = True
             half = len(episode) // 2
             episode.instructions[half:] = VOCAB.encode(VOCAB.decode(episode.instructions[0]) + " sorry the red cube")
             episode.next_instructions[half - 1 :] = episode.instructions[half]
-        added[i] = episode
-        buffer.add_episode(episode)
+
+    buffer, added = _filled(5000, 200, seed=6, edit=correct_halfway)
+    rng = np.random.default_rng(6)
     labelled = pending = 0
     for ground in (False, True):
         batch = buffer.sample(1024, rng, relabel_ratio=0.5, ground_real=ground)
@@ -375,16 +378,13 @@ def test_a_buffer_of_format_1_still_loads() -> None:
 
 
 def test_falls_fail_marks_the_step_that_dropped_an_object_unless_it_won() -> None:
-    rng = np.random.default_rng(10)
-    buffer = ReplayBuffer(5000, OBS_DIM, ACTION_DIM, max_objects=3, seed=10)
-    added = {}
-    for i in range(200):
-        episode = random_episode(rng, i)
+    def drop_at_the_end(_: int, episode: EpisodeData) -> None:
         if not episode.terminated[-1]:
             episode.fell = np.zeros(len(episode), dtype=bool)
             episode.fell[-1] = True  # the episode ended by dropping an object
-        added[i] = episode
-        buffer.add_episode(episode)
+
+    buffer, added = _filled(5000, 200, seed=10, edit=drop_at_the_end)
+    rng = np.random.default_rng(10)
     failed = 0
     for falls in (False, True):
         batch = buffer.sample(1024, rng, relabel_ratio=0.5, falls_fail=falls)
