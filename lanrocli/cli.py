@@ -157,7 +157,7 @@ def _percent(rate: float) -> str:
 
 
 def _print_report(report: EvaluationReport, title: str) -> None:
-    from lanrocli.envs.evaluation import FIGURE, JUDGED
+    from lanrocli.envs.figures import FIGURE, JUDGED
 
     table = Table(title=title)
     for column in ("episodes", "", "success", "95% CI"):

@@ -2,7 +2,7 @@
 
 Both actor and critic read an observation through a 128-unit layer and join it with a 32-number summary of
 the goal sentence (and, for the critic, the action) before the 256-unit hidden layers. The sentence summary
-is computed by a :class:`LanguageEncoder` that each network holds as ``encoder``; the networks take the
+is computed by a :class:`~lanrocli.agent.encoder.LanguageEncoder` that each network holds as ``encoder``; the networks take the
 summary as an input rather than the tokens, so the agent decides whether actor and critic read the
 sentence through separate encoders (the default) or through the critic's one.
 
@@ -16,82 +16,16 @@ must assemble for each slot separately.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lanrocli.agent.gru import read_sentences
-from lanrocli.language import PAD_ID
+if TYPE_CHECKING:
+    from lanrocli.agent.encoder import LanguageEncoder
 
-
-class LanguageEncoder(nn.Module):
-    """Word embedding and a GRU; the GRU's state after the sentence's last true word summarises the sentence.
-
-    A unidirectional GRU's state there depends only on the words up to it, so the padding that follows is
-    never read as words and the summary does not depend on the padded length. Padding is assumed to follow
-    the words, as :meth:`Vocabulary.encode` puts it.
-
-    Acting reads a few sentences at a time with the ``nn.GRU`` module, one fused call; an update reads a
-    batch's sentences with :func:`encode`, which steps the encoders of several networks together and is
-    tested to give the same summaries and gradients (see :mod:`lanrocli.agent.gru`).
-    """
-
-    def __init__(self, vocab_size: int, embedding_size: int, hidden_size: int) -> None:
-        super().__init__()
-        self.embedding = nn.Embedding(vocab_size, embedding_size, padding_idx=PAD_ID)
-        self.gru = nn.GRU(embedding_size, hidden_size, batch_first=True)
-        self.vocab_size = vocab_size
-        self.output_size = hidden_size
-
-    def forward(self, tokens: torch.Tensor) -> torch.Tensor:
-        """``tokens``: int64 [B, L] ids padded with 0. Returns float [B, hidden]."""
-        sentences, inverse = _distinct(tokens, self.vocab_size)
-        lengths = (sentences != PAD_ID).sum(dim=1)
-        states, _ = self.gru(self.embedding(sentences[:, : max(int(lengths.max()), 1)]))
-        summary = states[torch.arange(sentences.shape[0], device=tokens.device), (lengths - 1).clamp(min=0)]
-        # An empty sentence has read no word: its summary is the GRU's initial state, zero.
-        return (summary * (lengths > 0).unsqueeze(1).to(summary.dtype))[inverse]
-
-
-def encode(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> torch.Tensor:
-    """Each encoder's summaries of the sentences ``tokens`` (int64 [B, L]): float [encoders, B, hidden].
-
-    Each distinct sentence of the batch is read once: a batch repeats sentences, and an update reads a
-    transition's sentence and its next one, nearly always the same. Encoders whose parameters need no
-    gradient (a target network's) should come last: the backward pass then leaves them out.
-    """
-    sentences, inverse = _distinct(tokens, encoders[0].vocab_size)
-    return _summarise(encoders, sentences).index_select(1, inverse)
-
-
-def _distinct(tokens: torch.Tensor, vocab_size: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """The distinct rows of ``tokens`` and, per row, the index of its distinct row."""
-    length = tokens.shape[1]
-    if vocab_size**length >= 2**63:
-        sentences, inverse = torch.unique(tokens, dim=0, return_inverse=True)
-        return sentences, inverse
-    # A sentence read as a number in base vocab_size: distinct numbers are far cheaper to find than
-    # distinct rows. Any row with a given number stands for all of them, as they hold the same words.
-    powers = vocab_size ** torch.arange(length, device=tokens.device, dtype=torch.int64)
-    numbers, inverse = torch.unique((tokens * powers).sum(dim=1), return_inverse=True)
-    rows = torch.arange(tokens.shape[0], device=tokens.device)
-    first = torch.empty_like(numbers).scatter_(0, inverse, rows)
-    return tokens[first], inverse
-
-
-def _summarise(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> torch.Tensor:
-    """Every row of ``tokens`` read by every encoder, [encoders, B, hidden]; an empty row reads as zeros."""
-    grus = [encoder.gru for encoder in encoders]
-    words = [encoder.embedding.weight for encoder in encoders]
-    tables = torch.stack([torch.addmm(gru.bias_ih_l0, word, gru.weight_ih_l0.t()) for word, gru in zip(words, grus)])
-    weight_hh = torch.stack([gru.weight_hh_l0 for gru in grus])
-    bias_hh = torch.stack([gru.bias_hh_l0 for gru in grus])
-    learning = [any(p.requires_grad for p in encoder.parameters()) for encoder in encoders]
-    trained = sum(learning) if learning == sorted(learning, reverse=True) else None  # learning ones first
-    return read_sentences(tables, weight_hh, bias_hh, tokens, PAD_ID, trained)
 
 
 @dataclass(frozen=True)

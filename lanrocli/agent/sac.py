@@ -16,12 +16,14 @@ import torch.nn.functional as F
 from torch import nn
 
 from lanrocli.agent.buffer import Batch, ReplayBuffer
-from lanrocli.agent.networks import Actor, Critic, LanguageEncoder, ObjectLayout, encode
+from lanrocli.agent.encoder import LanguageEncoder, encode
+from lanrocli.agent.networks import Actor, Critic, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 
 _FORMAT = 1
+_UPDATE_METRICS = ("critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy")
 
 logger = logging.getLogger(__name__)
 
@@ -175,8 +177,8 @@ class SACAgent:
             next_action, next_log_prob = self.actor.sample(next_obs, next_actor_language, self.generator, next_present)
             next_q = self.target_critic(next_obs, next_target_language, next_action, next_present)
             target_q = reward + discount * not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
-            # A lost episode (an object dropped) is worth what failing for ever is: -1 at every step to come.
-            target_q = target_q + discount * self._tensor(batch.failed, torch.float32) * (FAILURE_REWARD / (1.0 - s.gamma))
+            if batch.failed.any():  # a lost episode (an object dropped) is worth failing for ever
+                target_q = target_q + discount * self._tensor(batch.failed, torch.float32) * (FAILURE_REWARD / (1.0 - s.gamma))
             if s.clip_target:
                 target_q = target_q.clamp(FAILURE_REWARD / (1.0 - s.gamma), SUCCESS_REWARD)
         # Object-wise readers weigh the objects once per network: the same attention serves the networks and
@@ -216,10 +218,7 @@ class SACAgent:
         with torch.no_grad():
             losses = [critic_loss, actor_loss, alpha_loss, grounding_loss]
             metrics = torch.stack([*losses, alpha, q.mean(), target_q.mean(), -log_prob.mean()]).tolist()
-        names = (
-            "critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy"
-        )
-        return dict(zip(names, metrics))
+        return dict(zip(_UPDATE_METRICS, metrics))
 
     def _grounding_loss(
         self, batch: Batch, critic_scores: torch.Tensor | None, actor_scores: torch.Tensor | None

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from lanrocli.envs.evaluation import FIGURE, FIGURES, JUDGED, Figure
+from lanrocli.envs.figures import FIGURE, FIGURES, JUDGED, Figure
 from lanrocli.stats import CONFIDENCE, IQM_RUNS, REPS, Estimate, bootstrap, iqm, probability_of_improvement
 from lanrocli.sweep.groups import Group, group_runs
 from lanrocli.train.runfolder import (

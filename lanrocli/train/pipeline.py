@@ -33,7 +33,8 @@ from typing import Any, TypeVar
 import torch
 
 from lanrocli.choices import Instruction
-from lanrocli.envs.evaluation import EvaluationReport, Rate, wilson_interval
+from lanrocli.envs.evaluation import EvaluationReport
+from lanrocli.envs.figures import Rate, wilson_interval
 from lanrocli.train.curriculum import Curriculum, CurriculumError, Promote, Stage, diff_curricula, load_curriculum
 from lanrocli.train.runfolder import (
     AGENT_METRICS,

@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from lanrocli.choices import Kind
-from lanrocli.envs.evaluation import ATTENTION, FIGURES, JUDGED, METRIC_NAMES, PHASES
+from lanrocli.envs.figures import ATTENTION, FIGURES, JUDGED, METRIC_NAMES, PHASES
 
 if TYPE_CHECKING:
     from lanrocli.train.curriculum import Curriculum

@@ -5,16 +5,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lanrocli.agent.networks import (
-    Actor,
-    Critic,
-    EnsembleLinear,
-    LanguageEncoder,
-    ObjectLayout,
-    SceneReader,
-    _summarise,
-    encode,
-)
+from lanrocli.agent.encoder import LanguageEncoder, _summarise, encode
+from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, ObjectLayout, SceneReader
 from lanrocli.language import grammar_vocabulary, sample_sentence
 
 VOCAB = grammar_vocabulary()

@@ -12,16 +12,8 @@ from hypothesis import strategies as st
 
 from lanrocli.choices import CorrectionForm, Instruction, Kind
 from lanrocli.envs.env import LanroEnv
-from lanrocli.envs.evaluation import (
-    ATTENTION,
-    FIGURES,
-    METRIC_NAMES,
-    PHASES,
-    PLAIN,
-    EpisodeResult,
-    EvaluationReport,
-    evaluate,
-)
+from lanrocli.envs.evaluation import EvaluationReport, evaluate
+from lanrocli.envs.figures import ATTENTION, FIGURES, METRIC_NAMES, PHASES, PLAIN, EpisodeResult
 from lanrocli.envs.policies import make_policy
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.language import TASK_VERBS, identifying_phrases, instruction

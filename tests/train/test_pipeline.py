@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 
 from lanrocli.choices import CorrectionForm
-from lanrocli.envs.evaluation import EpisodeResult, EvaluationReport, wilson_interval
+from lanrocli.envs.evaluation import EvaluationReport
+from lanrocli.envs.figures import EpisodeResult, wilson_interval
 from lanrocli.train.checkpoint import AGENT_FILE, resolve_checkpoint
 from lanrocli.train.curriculum import Curriculum, load_curriculum
 from lanrocli.train.pipeline import CurriculumRun, RunError, _once_per_agent, _restore_files

@@ -8,7 +8,8 @@ import pytest
 
 from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.choices import CorrectionForm
-from lanrocli.envs.evaluation import ATTENTION, PHASES, PLAIN, EpisodeResult, EvaluationReport
+from lanrocli.envs.evaluation import EvaluationReport
+from lanrocli.envs.figures import ATTENTION, PHASES, PLAIN, EpisodeResult
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.seeds import correction_test_seed, held_out_seed
 from lanrocli.train.testset import (
