@@ -357,6 +357,9 @@ def evaluate_command(
         where = "held-out test episodes" if measurement.held_out else f"seed {measurement.first_seed}"
         if instruction is not Instruction.TRUE:
             where += f", instruction {instruction}"
+    if record.get("unknown_words"):
+        unknown = ", ".join(record["unknown_words"])
+        err_console.print(f"[bold yellow]warning:[/] {escape(f'the agent never learned the words {unknown}: it reads each as <unk>')}")
     if as_json:
         typer.echo(json.dumps(record))
         return

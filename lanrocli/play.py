@@ -58,7 +58,6 @@ from lanrocli.language import (
     all_corrections,
     all_instructions,
     extend,
-    grammar_vocabulary,
 )
 from lanrocli.language.vocabulary import UNK
 from lanrocli.sim import CONTROL_DT
@@ -302,7 +301,7 @@ def play(path: Path, options: PlayOptions, stream: TextIO, console: Console) -> 
         raise PlayError(f"--gif {options.gif} is a file; give a folder, where episode-1.gif, ... are written")
     task, settings, slots, policy = load_agent(path, options)
     try:
-        env = LanroEnv(task, settings, object_slots=slots, gui=options.gui)
+        env = LanroEnv(task, settings, object_slots=slots, gui=options.gui, vocabulary=policy.vocabulary)
     except pybullet.error as error:
         raise PlayError(f"PyBullet could not open its window: {error}") from None
     try:
@@ -320,7 +319,7 @@ class Session:
         self.lines = lines
         self.console = console
         self.options = options
-        self.vocabulary = grammar_vocabulary()
+        self.vocabulary = policy.vocabulary
         self.grammar = Grammar.of(env.task.name)
 
     def say(self, text: str, style: str | None = None) -> None:

@@ -12,7 +12,7 @@ from lanrocli.envs.instructor import Instructor
 from lanrocli.envs.scene import Scene, sample_scene
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.tasks import TaskView, make_task
-from lanrocli.language import COLOURS, SHAPES, grammar_vocabulary
+from lanrocli.language import COLOURS, SHAPES, Vocabulary, grammar_vocabulary
 from lanrocli.reward import reward
 from lanrocli.sim import (
     MAX_FINGER_WIDTH,
@@ -88,7 +88,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     and lift) the share that starts with the open hand around a random object (both for training).
 
     ``instruction`` is the current goal sentence (instruction, plus the correction from the step it is
-    spoken) in the grammar-wide vocabulary, padded with 0. Reward is 0 when the task holds for the goal
+    spoken) as token ids of ``vocabulary`` (by default the grammar's; an agent's own when one is run),
+    padded with 0. Reward is 0 when the task holds for the goal
     object, else -1; success ends the episode (terminated), and so does an object falling off the table
     (truncated, with ``info["fell"]``: the episode is lost, not merely out of time). ``info`` carries
     ``is_success``, ``achieved`` (per object), ``goal_index``,
@@ -107,6 +108,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         object_slots: int | None = None,
         render_mode: str | None = None,
         gui: bool = False,
+        vocabulary: Vocabulary | None = None,
         **changes: Any,
     ) -> None:
         """``settings`` (default: ``EnvSettings()``), with any of its fields changed by keyword, as
@@ -124,7 +126,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.object_slots = slots
         self.render_mode = render_mode
         self.max_episode_steps = settings.episode_limit
-        self.vocabulary = grammar_vocabulary()
+        self.vocabulary = vocabulary if vocabulary is not None else grammar_vocabulary()
         n = observation_size(slots)
         self.observation_space = gym.spaces.Dict(
             {

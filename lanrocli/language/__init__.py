@@ -34,7 +34,14 @@ from lanrocli.language.properties import (
     ObjectProps,
     check_task,
 )
-from lanrocli.language.vocabulary import PAD_ID, UNK_ID, SentenceTooLong, Vocabulary, grammar_vocabulary
+from lanrocli.language.vocabulary import (
+    PAD_ID,
+    UNK_ID,
+    SentenceTooLong,
+    Vocabulary,
+    agent_vocabulary,
+    grammar_vocabulary,
+)
 
 __all__ = [
     "BEGINNING_WORDS",
@@ -62,6 +69,7 @@ __all__ = [
     "correction",
     "correction_forms",
     "extend",
+    "agent_vocabulary",
     "grammar_vocabulary",
     "identifying_phrases",
     "instruction",

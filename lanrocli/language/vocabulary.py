@@ -1,9 +1,16 @@
-"""The one vocabulary of the whole curriculum and the fixed-length encoding of sentences into token ids."""
+"""The one vocabulary of the whole curriculum and the fixed-length encoding of sentences into token ids.
+
+Word ids are part of every trained agent (its embedding's rows), so they never shift: their order is the
+list in ``word_ids.txt``, and a word the grammar gains without a line there is appended after them. An
+agent's own vocabulary is saved with each of its checkpoints and read back by everything that runs it.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from functools import cache
+from importlib import resources
+from typing import Any
 
 import numpy as np
 
@@ -99,7 +106,43 @@ class Vocabulary:
         return cls(words, max_length)
 
 
+WORD_IDS_FILE = "word_ids.txt"
+
+
+def listed_words() -> list[str]:
+    """The words of ``word_ids.txt`` in id order."""
+    text = resources.files(__package__).joinpath(WORD_IDS_FILE).read_text(encoding="utf-8")
+    return [line.strip() for line in text.splitlines() if line.strip() and not line.startswith("#")]
+
+
+def stable_order(words: Iterable[str], listed: Sequence[str]) -> list[str]:
+    """``listed`` in its order, then the ``words`` it lacks in sorted order: ids already given never move."""
+    known = set(listed)
+    return list(listed) + sorted(set(words) - known)
+
+
 @cache
 def grammar_vocabulary() -> Vocabulary:
-    """The vocabulary of every word any stage may speak, in sorted order, with L from the grammar."""
-    return Vocabulary(grammar_words(), max_sentence_words())
+    """The vocabulary of every word any stage may speak, in stable id order, with L from the grammar."""
+    return Vocabulary(stable_order(grammar_words(), listed_words()), max_sentence_words())
+
+
+def agent_vocabulary(saved: dict[str, Any] | None, vocab_size: int) -> Vocabulary:
+    """The vocabulary an agent of ``vocab_size`` embedding rows was trained with: the one saved with it,
+    or, for a checkpoint that holds none, the first words of the stable order (its ids were the same)."""
+    if saved:
+        vocabulary = Vocabulary.from_dict(saved)
+    else:
+        words = stable_order(grammar_words(), listed_words())[: vocab_size - 2]
+        vocabulary = Vocabulary(words, max_sentence_words())
+    if len(vocabulary) != vocab_size:
+        raise ValueError(
+            f"the agent embeds {vocab_size} token ids but its vocabulary has {len(vocabulary)}: "
+            "the checkpoint's agent and vocabulary do not belong together"
+        )
+    return vocabulary
+
+
+def unknown_words(vocabulary: Vocabulary) -> list[str]:
+    """The grammar's words that ``vocabulary`` lacks: an agent reads each of them as ``<unk>``."""
+    return [w for w in grammar_vocabulary().words[2:] if w not in vocabulary]

@@ -24,6 +24,7 @@ from lanrocli.choices import CorrectionForm, Instruction
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.evaluation import EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.language.vocabulary import unknown_words
 from lanrocli.train.checkpoint import resolve_checkpoint
 from lanrocli.train.seeds import correction_test_seed, held_out_seed
 from lanrocli.train.trainer import AgentPolicy, TrainSettings, load_policy
@@ -114,7 +115,13 @@ def _run(
     enough: Callable[[EvaluationReport], bool] | None = None,
 ) -> EvaluationReport:
     settings = loaded.settings
-    env = LanroEnv(settings.task, loaded.env, object_slots=settings.slots, render_mode="rgb_array" if gif else None)
+    env = LanroEnv(
+        settings.task,
+        loaded.env,
+        object_slots=settings.slots,
+        render_mode="rgb_array" if gif else None,
+        vocabulary=loaded.policy.vocabulary,
+    )
     try:
         return evaluate(env, loaded.policy, episodes, first, gif, progress, instruction, enough)
     finally:
@@ -130,6 +137,7 @@ def _record(
         "env": loaded.env.to_dict(),
         "episodes_from": episodes_from,
         "instruction": instruction.value,
+        "unknown_words": unknown_words(loaded.policy.vocabulary),
         **report.as_dict(),
     }
 

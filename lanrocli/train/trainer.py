@@ -29,7 +29,7 @@ from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
 from lanrocli.envs.evaluation import EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.tasks import make_task
-from lanrocli.language import grammar_vocabulary
+from lanrocli.language import Vocabulary, agent_vocabulary, grammar_vocabulary
 from lanrocli.train.checkpoint import Checkpoint, load_checkpoint, resolve_checkpoint, save_checkpoint
 from lanrocli.train.collect import Collector
 from lanrocli.train.runfolder import CheckpointError
@@ -122,10 +122,12 @@ def pick_device(requested: str | None) -> torch.device:
 
 
 class AgentPolicy:
-    """The agent's deterministic policy in the scripted-policy interface, for evaluation."""
+    """The agent's deterministic policy in the scripted-policy interface, for evaluation, with the
+    vocabulary it reads: the environments it acts in must encode their sentences with it."""
 
-    def __init__(self, agent: SACAgent) -> None:
+    def __init__(self, agent: SACAgent, vocabulary: Vocabulary) -> None:
         self.agent = agent
+        self.vocabulary = vocabulary
 
     def reset(self, seed: int | None = None) -> None:
         pass
@@ -144,7 +146,8 @@ def load_policy(path: Path, device: str | torch.device = "cpu") -> tuple[TrainSe
     a pointer file or a run folder. Raises CheckpointError, ValueError or KeyError on a bad checkpoint."""
     contents = load_checkpoint(resolve_checkpoint(path), device, resumable=False)
     agent = SACAgent.from_state_dict(contents.agent, torch.device(device))
-    return TrainSettings.from_dict(contents.train_settings), AgentPolicy(agent)
+    vocabulary = agent_vocabulary(contents.vocabulary, agent.vocab_size)
+    return TrainSettings.from_dict(contents.train_settings), AgentPolicy(agent, vocabulary)
 
 
 @dataclass
@@ -165,11 +168,19 @@ class Trainer:
     changes what the environments are, which is how a curriculum moves on.
     """
 
-    def __init__(self, settings: TrainSettings, agent_settings: SACSettings, device: str | torch.device = "cpu") -> None:
+    def __init__(
+        self,
+        settings: TrainSettings,
+        agent_settings: SACSettings,
+        device: str | torch.device = "cpu",
+        vocabulary: Vocabulary | None = None,
+    ) -> None:
+        """``vocabulary``: the agent's, when it exists already (a resumed run); a new agent reads the
+        grammar's."""
         self.settings = settings
         self.agent_settings = agent_settings
         self.device = torch.device(device)
-        self.vocabulary = grammar_vocabulary()
+        self.vocabulary = vocabulary if vocabulary is not None else grammar_vocabulary()
         obs_dim = observation_size(settings.slots)
         action_dim = make_task(settings.task).action_size
         layout = ObjectLayout(ARM_SIZE, OBJECT_SIZE, settings.slots)
@@ -197,7 +208,8 @@ class Trainer:
         """Builds environments of the current stage, observed through the run's object slots. A plain
         partial, so that subprocesses receive the settings and not the trainer."""
         s = self.settings
-        return functools.partial(LanroEnv, s.task, s.env.for_evaluation() if evaluation else s.env, object_slots=s.slots)
+        env = s.env.for_evaluation() if evaluation else s.env
+        return functools.partial(LanroEnv, s.task, env, object_slots=s.slots, vocabulary=self.vocabulary)
 
     def enter_stage(self, env: EnvSettings, stage: int) -> None:
         """Collect and evaluate with new environment settings from now on.
@@ -256,7 +268,7 @@ class Trainer:
         """The deterministic policy on evaluation episodes; episode i is reset with ``first_seed + i``."""
         env = self.env_factory(evaluation=True)()
         try:
-            return evaluate(env, AgentPolicy(self.agent), episodes or self.settings.eval_episodes, first_seed)
+            return evaluate(env, AgentPolicy(self.agent, self.vocabulary), episodes or self.settings.eval_episodes, first_seed)
         finally:
             env.close()
 
@@ -296,9 +308,11 @@ class Trainer:
     def load(cls, directory: Path, device: str | torch.device = "cpu") -> tuple[Trainer, dict[str, Any]]:
         """The trainer exactly as a resumable checkpoint left it, and the caller's ``extra`` data."""
         contents = load_checkpoint(directory, device)
-        trainer = cls(TrainSettings.from_dict(contents.train_settings), contents.agent_settings, device)
-        if trainer.vocabulary.to_dict() != contents.vocabulary:
-            raise CheckpointError(f"{directory} was written with another vocabulary than this version of lanro's")
+        try:
+            vocabulary = agent_vocabulary(contents.vocabulary, contents.agent["vocab_size"])
+        except ValueError as error:
+            raise CheckpointError(f"{directory}: {error}") from None
+        trainer = cls(TrainSettings.from_dict(contents.train_settings), contents.agent_settings, device, vocabulary)
         trainer.agent.load_state_dict(contents.agent)
         trainer.buffer = contents.buffer
         trainer.progress = Progress(**contents.progress)

@@ -19,6 +19,9 @@ from lanrocli.language import (
     grammar_vocabulary,
     sample_sentence,
 )
+from lanrocli.language import vocabulary as vocabulary_module
+from lanrocli.language.grammar import grammar_words
+from lanrocli.language.vocabulary import agent_vocabulary, listed_words, unknown_words
 
 
 def test_vocabulary_is_exactly_the_words_the_grammar_speaks() -> None:
@@ -37,7 +40,39 @@ def test_vocabulary_is_exactly_the_words_the_grammar_speaks() -> None:
 
 def test_order_is_stable() -> None:
     assert grammar_vocabulary().words == Vocabulary.from_dict(grammar_vocabulary().to_dict()).words
-    assert list(grammar_vocabulary().words[2:]) == sorted(grammar_vocabulary().words[2:])
+    assert list(grammar_vocabulary().words[2:]) == listed_words()
+
+
+def test_every_word_of_the_grammar_has_its_line_in_the_word_ids_file() -> None:
+    missing = sorted(set(grammar_words()) - set(listed_words()))
+    assert not missing, f"append {missing} at the end of lanrocli/language/word_ids.txt (never reorder it)"
+    assert len(set(listed_words())) == len(listed_words())
+
+
+def test_a_word_added_to_the_grammar_takes_the_next_id_and_shifts_none(monkeypatch: pytest.MonkeyPatch) -> None:
+    before = grammar_vocabulary()
+    monkeypatch.setattr(vocabulary_module, "grammar_words", lambda: ["aardvark", *grammar_words(), "zebu"])
+    grammar_vocabulary.cache_clear()
+    try:
+        after = grammar_vocabulary()
+        assert after.words[: len(before)] == before.words
+        assert after.words[len(before) :] == ("aardvark", "zebu")
+    finally:
+        grammar_vocabulary.cache_clear()
+
+
+def test_an_agent_reads_with_its_own_vocabulary_or_the_one_it_was_trained_with() -> None:
+    mine = Vocabulary(["push", "the", "red"], 4)
+    assert agent_vocabulary(mine.to_dict(), len(mine)) == mine
+    older = agent_vocabulary(None, 12)  # a checkpoint that stored none: the first ten words of the stable order
+    assert older.words[2:] == tuple(listed_words()[:10]) and older.max_length == grammar_vocabulary().max_length
+    with pytest.raises(ValueError, match="do not belong together"):
+        agent_vocabulary(mine.to_dict(), len(mine) + 1)
+
+
+def test_unknown_words_names_the_grammar_words_an_agent_lacks() -> None:
+    assert unknown_words(grammar_vocabulary()) == []
+    assert unknown_words(Vocabulary(list(grammar_vocabulary().words[3:]), 10)) == [grammar_vocabulary().words[2]]
 
 
 @pytest.mark.parametrize("task", TASKS)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -11,16 +12,21 @@ from lanrocli.choices import CorrectionForm
 from lanrocli.envs.evaluation import EvaluationReport
 from lanrocli.envs.figures import ATTENTION, PHASES, PLAIN, EpisodeResult
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.language import Vocabulary
+from lanrocli.language import vocabulary as vocabulary_module
+from lanrocli.train.checkpoint import load_checkpoint, save_checkpoint
 from lanrocli.train.seeds import correction_test_seed, held_out_seed
 from lanrocli.train.testset import (
     CORRECTION_QUOTA,
     CORRECTION_TEST_NEGATION_RATE,
     QUOTA_TEST_EPISODES,
     CorrectionQuota,
+    _load,
+    _run,
     correction_test,
     measure,
 )
-from lanrocli.train.trainer import Trainer, TrainSettings
+from lanrocli.train.trainer import AgentPolicy, Trainer, TrainSettings
 
 STAGE = EnvSettings(objects=2, correction_rate=0.5, negations=True, max_episode_steps=8)
 
@@ -83,3 +89,36 @@ def test_the_ordinary_measure_keeps_the_stage_and_its_test_episodes(checkpoint: 
     record = measure(checkpoint, 2).record
     assert record["episodes_from"] == {"test_set": True, "first_seed": held_out_seed(3, 1)}
     assert record["env"]["correction_rate"] == 0.5 and record["env"]["negation_rate"] is None
+
+
+def _extend_grammar(monkeypatch: pytest.MonkeyPatch, *words: str) -> None:
+    original = vocabulary_module.grammar_words
+    monkeypatch.setattr(vocabulary_module, "grammar_words", lambda: sorted([*original(), *words]))
+    vocabulary_module.grammar_vocabulary.cache_clear()
+
+
+def test_a_checkpoint_evaluates_alike_after_the_grammar_gains_a_word(
+    checkpoint: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    before = measure(checkpoint, 3).record
+    try:
+        _extend_grammar(monkeypatch, "aardvark")  # sorts first: had ids been rebuilt, every word would shift
+        after = measure(checkpoint, 3).record
+        assert after.pop("unknown_words") == ["aardvark"] and before.pop("unknown_words") == []
+        assert after == before
+        # The figures can tell: the same agent reading every id shifted by one attends otherwise.
+        loaded = _load(checkpoint, "cpu", lambda _: {}, None)
+        rebuilt = sorted([*loaded.policy.vocabulary.words[2:], "aardvark"])[:-1]
+        policy = AgentPolicy(loaded.policy.agent, Vocabulary(rebuilt, loaded.policy.vocabulary.max_length))
+        misread = _run(dataclasses.replace(loaded, policy=policy), 3, before["episodes_from"]["first_seed"])
+        assert misread.as_dict()[ATTENTION] != before[ATTENTION]
+    finally:
+        vocabulary_module.grammar_vocabulary.cache_clear()
+
+
+def test_a_checkpoint_that_stored_no_vocabulary_reads_with_the_one_it_was_trained_with(
+    checkpoint: Path, tmp_path: Path
+) -> None:
+    contents = load_checkpoint(checkpoint, resumable=False)
+    older = save_checkpoint(tmp_path / "stage-2-negations" / "checkpoint", dataclasses.replace(contents, vocabulary={}))
+    assert measure(older, 3).record == measure(checkpoint, 3).record
