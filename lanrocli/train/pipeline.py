@@ -32,7 +32,7 @@ from typing import Any, TypeVar
 
 import torch
 
-from lanrocli.choices import Instruction
+from lanrocli.choices import Instruction, Split
 from lanrocli.envs.evaluation import EvaluationReport
 from lanrocli.envs.figures import Rate, wilson_interval
 from lanrocli.train.curriculum import Curriculum, CurriculumError, Promote, Stage, diff_curricula, load_curriculum
@@ -41,6 +41,7 @@ from lanrocli.train.runfolder import (
     BEST,
     CONFIG,
     CORRECTION_TEST,
+    SPLITS,
     LANGUAGE,
     LAST,
     LATEST,
@@ -72,7 +73,7 @@ from lanrocli.train.runfolder import (
 )
 from lanrocli.train.seeds import evaluation_seed
 from lanrocli.train.checkpoint import resolve_checkpoint
-from lanrocli.train.testset import CORRECTION_QUOTA, checkpoint_name, correction_test, measure
+from lanrocli.train.testset import CORRECTION_QUOTA, checkpoint_name, correction_test, measure, split_test
 from lanrocli.train.trainer import Trainer, TrainSettings
 
 Loaded = TypeVar("Loaded")
@@ -340,7 +341,8 @@ class CurriculumRun:
     def _test(self, result: StageResult) -> None:
         """The stage's last and best agents on its held-out test episodes, read back from their
         checkpoints; the final agent of the run also with a blank and another object's sentence, and the last
-        stage's agents on the correction test, sized like the test (``CorrectionQuota.scaled``)."""
+        stage's agents on the correction test, sized like the test (``CorrectionQuota.scaled``), and on each
+        generalisation split of the run's holdout, as many episodes as the test."""
         stage = self.curriculum.stages[result.index]
         folder = self.out / stage_folder(result.index, stage.name)
         episodes = self.curriculum.test.episodes
@@ -357,8 +359,15 @@ class CurriculumRun:
             record[CORRECTION_TEST] = _once_per_agent(
                 folder, agents, lambda path: correction_test(path, quota, device).record
             )
+            splits = self.trainer.settings.holdout.splits
+            if splits:
+                record[SPLITS] = {split.value: self._split_test(folder, agents, split) for split in splits}
         write_json(folder / TEST, record)
         write_report(self.out, self.curriculum, self.state)
+
+    def _split_test(self, folder: Path, agents: list[str], split: Split) -> dict[str, dict[str, Any]]:
+        episodes, device = self.curriculum.test.episodes, self.trainer.device
+        return _once_per_agent(folder, agents, lambda path: split_test(path, split, episodes, device).record)
 
     def complete_tests(self) -> None:
         """Measure stages that ended but were not measured yet: a run killed while testing does it on resume."""
@@ -425,6 +434,7 @@ def _train_settings(curriculum: Curriculum) -> TrainSettings:
         buffer=curriculum.buffer.settings(),
         object_slots=curriculum.max_objects,
         stage=0,
+        holdout=curriculum.holdout.settings(),
     )
 
 
