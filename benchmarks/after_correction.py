@@ -83,7 +83,9 @@ def main() -> None:
     torch.set_num_threads(1)
     settings, policy = load_policy(args.checkpoint)
     env_settings = settings.env.for_evaluation().replace(correction_rate=1.0, kinds=tuple(args.kinds))
-    env = LanroEnv(settings.task, env_settings, object_slots=settings.slots)
+    env = LanroEnv(
+        settings.task, env_settings, object_slots=settings.slots, vocabulary=policy.vocabulary, holdout=settings.holdout
+    )
     outcomes = [run(env, policy, args.seed + i) for i in range(args.episodes)]
     env.close()
     spoken = [o for o in outcomes if o is not None]

@@ -48,11 +48,9 @@ START_TRIES = 50
 """Random start positions tried before falling back to the neutral pose (nine in ten are clear)."""
 
 FALLEN = -0.05
-"""An object whose centre is lower than this (m) has fallen off the table; the episode ends there.
-
-Nothing stops a falling object (the world has no floor), and a fall in the replay buffer is an object tens
-of metres down by the end of the episode: a reach run with 2% of its stored object positions below the
-table had its normaliser scale object heights by 2.7 m instead of millimetres."""
+"""An object whose centre is lower than this (m) has fallen off the table. The goal's fall ends the episode,
+lost; another object's does not: the arm can still do what it was asked, and a correction episode whose
+wrong object was pushed off while the instructor waited to speak is not lost for that."""
 
 
 def observation_size(n_objects: int) -> int:
@@ -91,8 +89,9 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     ``instruction`` is the current goal sentence (instruction, plus the correction from the step it is
     spoken) as token ids of ``vocabulary`` (by default the grammar's; an agent's own when one is run),
     padded with 0. Reward is 0 when the task holds for the goal
-    object, else -1; success ends the episode (terminated), and so does an object falling off the table
-    (truncated, with ``info["fell"]``: the episode is lost, not merely out of time). ``info`` carries
+    object, else -1; success ends the episode (terminated), and so does the goal falling off the table
+    (truncated, with ``info["fell"]``: the episode is lost, not merely out of time); another object may
+    fall to the floor and the episode goes on. ``info`` carries
     ``is_success``, ``achieved`` (per object), ``goal_index``,
     ``object_positions``, ``objects`` (``ObjectProps`` in observation order), ``instruction_text``,
     ``challenge`` (the ``Kind`` of misunderstanding of a correction episode, or ``None``) and ``correction``
@@ -243,7 +242,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self._tokens = self.vocabulary.encode(self.instructor.text)
         success = bool(self._achieved[self._scene.goal_index])
         # Truncated, not terminated: ending there must not look like the zero future value of a success.
-        self._fell = not success and bool(np.any(self.objects.states().positions[:, 2] < FALLEN))
+        self._fell = not success and bool(self.objects.states().positions[self._scene.goal_index, 2] < FALLEN)
         truncated = not success and (self._steps >= self.max_episode_steps or self._fell)
         return self._observation(), reward(success), success, truncated, self._info()
 

@@ -60,6 +60,9 @@ TABLE_HALF_EXTENTS: Vec3 = (0.55, 0.40, 0.20)
 TABLE_CENTRE: Vec3 = (-0.25, 0.0, -0.20)
 """Table box centre, chosen so that its top face is the plane z = 0."""
 
+FLOOR_HEIGHT = TABLE_CENTRE[2] - TABLE_HALF_EXTENTS[2]
+"""The floor at the table's foot, where an object pushed off the table comes to rest (m)."""
+
 TABLE_LATERAL_FRICTION = 0.5
 """Bullet multiplies frictions; with objects at 1.0 pushed objects slide at mu = 0.5."""
 

@@ -24,6 +24,7 @@ from lanrocli.sim.layout import (
     GRAVITY,
     SOLVER_ITERATIONS,
     SUBSTEPS,
+    FLOOR_HEIGHT,
     TABLE_CENTRE,
     TABLE_HALF_EXTENTS,
     TABLE_LATERAL_FRICTION,
@@ -50,7 +51,7 @@ def _native_stdout_silenced() -> Iterator[None]:
 
 
 class World:
-    """A PyBullet world with a table whose top is the plane z = 0.
+    """A PyBullet world with a table whose top is the plane z = 0, on a floor at its foot.
 
     One control step is a single ``stepSimulation`` call that PyBullet splits into
     ``SUBSTEPS`` physics steps of 1 / ``PHYSICS_HZ`` s. That is about 3 % faster than 20
@@ -103,6 +104,10 @@ class World:
             basePosition=TABLE_CENTRE,
         )
         client.changeDynamics(table, -1, lateralFriction=TABLE_LATERAL_FRICTION)
+        # The floor: an object pushed off the table lands and rests instead of falling without end, so what
+        # the observation reports of it stays within the room.
+        floor = client.createCollisionShape(pybullet.GEOM_PLANE)
+        client.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=floor, basePosition=(0.0, 0.0, FLOOR_HEIGHT))
         return int(table)
 
     @property

@@ -12,6 +12,7 @@ from lanrocli.registration import ENV_IDS
 from lanrocli.envs.policies import make_policy
 from lanrocli.language import RARE_WORD_COLOURS, SHAPE_WORDS, all_corrections, all_instructions, grammar_vocabulary
 from lanrocli.sim import WORKSPACE
+from lanrocli.sim.layout import FLOOR_HEIGHT
 
 INFO_KEYS = {
     "is_success",
@@ -313,15 +314,25 @@ def test_start_shares_split_the_episodes_and_need_a_gripper() -> None:
         LanroEnv("push", object_start=0.5)
 
 
-def test_an_object_falling_off_the_table_truncates_the_episode() -> None:
+def test_the_goal_falling_off_the_table_truncates_the_episode_another_object_lands_on_the_floor() -> None:
     env = LanroEnv("push", objects=2)
-    env.reset(seed=0)
+    _, info = env.reset(seed=0)
+    goal, other = info["goal_index"], 1 - info["goal_index"]
     _, _, terminated, truncated, info = env.step(np.zeros(3))
     assert not (terminated or truncated or info["fell"])
-    body = env.objects.body_ids[1]
-    env.world.client.resetBasePositionAndOrientation(body, (0.5, 0.0, -0.1), (0.0, 0.0, 0.0, 1.0))
-    env.world.invalidate()
+
+    def drop(index: int) -> None:
+        body = env.objects.body_ids[index]
+        env.world.client.resetBasePositionAndOrientation(body, (0.5, 0.0, -0.1), (0.0, 0.0, 0.0, 1.0))
+        env.world.invalidate()
+
+    drop(other)
+    for _ in range(40):  # about a second and a half: long enough to reach the floor and settle
+        _, reward, terminated, truncated, info = env.step(np.zeros(3))
+        assert not (terminated or truncated or info["fell"]) and reward == -1.0
+    assert abs(info["object_positions"][other, 2] - FLOOR_HEIGHT) < 0.05  # at rest on the floor, not falling on
+    drop(goal)
     _, reward, terminated, truncated, info = env.step(np.zeros(3))
-    assert truncated and not terminated and reward == -1.0 and info["object_positions"][1, 2] < -0.1
+    assert truncated and not terminated and reward == -1.0 and info["object_positions"][goal, 2] < -0.1
     assert info["fell"]  # the learner tells this end from the time limit's
     env.close()
