@@ -435,11 +435,18 @@ def _test_episodes(path: Path) -> int:
         return HeldOutConfig().episodes
 
 
+CURRICULUM_HELP = "A YAML file, or the name of a curriculum that ships with lanro, such as push"
+
+
 @app.command("check")
 def check_command(
     curriculum: Annotated[
-        Path | None,
-        typer.Argument(help="Curriculum YAML file to validate. Optional with --quick (the built-in one)."),
+        str | None,
+        typer.Argument(
+            metavar="CURRICULUM",
+            help=f"Curriculum to validate: {CURRICULUM_HELP}. Without one, the packaged curricula are listed; with "
+            "--quick, the built-in one is checked.",
+        ),
     ] = None,
     quick: Annotated[
         bool,
@@ -451,21 +458,36 @@ def check_command(
 ) -> None:
     """Validate a curriculum and print the resolved plan (stages, budgets, total steps) without training."""
     if curriculum is None and not quick:
-        raise fail("give a curriculum file (e.g. curricula/reach.yaml), or --quick for the built-in one")
+        _print_packaged()
+        return
     plan = _load_plan(curriculum, quick, None, None)
     _print_plan(plan)
 
 
-def _load_plan(path: Path | None, quick: bool, seed: int | None, envs: int | None) -> Curriculum:
-    """The curriculum to run, with the command line's overrides: the file at ``path``, scaled down by
-    ``quick`` (to try a file out); without a file, with ``quick``, the built-in curriculum exactly as
-    written (``curricula/quick.yaml``, whose budgets are small already)."""
-    from lanrocli.train.curriculum import CurriculumError, builtin_curriculum, load_curriculum
+def _print_packaged() -> None:
+    from lanrocli.train.curriculum import load_curriculum, packaged_curricula
+
+    table = Table(title="the curricula that ship with lanro")
+    for column in ("name", "task", "stages", "steps at most"):
+        table.add_column(column)
+    for name, path in packaged_curricula().items():
+        plan = load_curriculum(path)
+        table.add_row(name, plan.task, ", ".join(stage.name for stage in plan.stages), f"{plan.total_steps:,}")
+    console = Console()
+    console.print(table)
+    console.print("'lanro check NAME' shows one's plan, 'lanro train NAME' runs it", highlight=False)
+
+
+def _load_plan(path: str | None, quick: bool, seed: int | None, envs: int | None) -> Curriculum:
+    """The curriculum to run, with the command line's overrides: the file or packaged curriculum ``path``
+    names, scaled down by ``quick`` (to try a file out); without one, with ``quick``, the built-in
+    curriculum exactly as written (``curricula/quick.yaml``, whose budgets are small already)."""
+    from lanrocli.train.curriculum import CurriculumError, builtin_curriculum, find_curriculum, load_curriculum
 
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", FutureWarning)
-            plan = load_curriculum(path) if path is not None else builtin_curriculum()
+            plan = load_curriculum(find_curriculum(path)) if path is not None else builtin_curriculum()
         for warning in caught:
             err_console.print(f"[bold yellow]warning:[/] {escape(f'{path}: {warning.message}')}")
     except CurriculumError as error:
@@ -515,9 +537,11 @@ def _print_plan(plan: Curriculum) -> None:
 @app.command("train")
 def train_command(
     curriculum: Annotated[
-        Path | None,
+        str | None,
         typer.Argument(
-            help="Curriculum YAML file. Optional with --quick (the built-in curricula/quick.yaml) and with --resume."
+            metavar="CURRICULUM",
+            help=f"{CURRICULUM_HELP} ('lanro check' lists them). Optional with --quick (the built-in "
+            "curricula/quick.yaml) and with --resume.",
         ),
     ] = None,
     out: Annotated[Path | None, typer.Option(help="Run folder (default: checkpoints/<curriculum name>).")] = None,
@@ -536,7 +560,8 @@ def train_command(
 ) -> None:
     """Train an agent through a curriculum of stages, with evaluation, checkpoints and resume."""
     if curriculum is None and not quick and not resume:
-        raise fail("give a curriculum file (e.g. curricula/reach.yaml), or --quick for the built-in one")
+        raise fail("give a curriculum (a YAML file, or a packaged one by name: 'lanro check' lists them), or --quick "
+                   "for the built-in one")
     plan = None if curriculum is None and resume and not quick else _load_plan(curriculum, quick, seed, envs)
 
     # Only now: a bad curriculum is refused without waiting for torch and pybullet to load.
@@ -662,8 +687,11 @@ class _ManyValues(typer.core.TyperCommand):
 @app.command("sweep", cls=_ManyValues)
 def sweep_command(
     curriculum: Annotated[
-        Path | None,
-        typer.Argument(help="Curriculum YAML file. Optional with --quick (the built-in one) and with --resume."),
+        str | None,
+        typer.Argument(
+            metavar="CURRICULUM",
+            help=f"{CURRICULUM_HELP}. Optional with --quick (the built-in one) and with --resume.",
+        ),
     ] = None,
     out: Annotated[
         Path | None, typer.Option(help="Sweep folder: sweep.yaml and one run folder per trial (default: sweeps/<name>).")
@@ -724,7 +752,8 @@ def sweep_command(
         except sweeps.SweepError as error:
             raise fail(str(error)) from None
     elif not resume:
-        raise fail("give a curriculum file (e.g. curricula/push.yaml), --quick for the built-in one, or --resume")
+        raise fail("give a curriculum (a YAML file, or a packaged one by name: 'lanro check' lists them), --quick for "
+                   "the built-in one, or --resume")
     elif seeds or changes or grid:
         raise fail("--seeds, --set and --grid need the curriculum file they apply to")
     if out is None:

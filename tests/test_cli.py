@@ -206,8 +206,23 @@ def test_quick_without_a_file_runs_quick_yaml_as_written_and_with_a_file_scales_
     assert builtin.output == runner.invoke(app, ["check", str(QUICK)]).output
     scaled = runner.invoke(app, ["check", str(QUICK), "--quick"])
     assert scaled.exit_code == 0 and f"{written.name}-quick:" in scaled.output
-    missing = runner.invoke(app, ["check"])
-    assert missing.exit_code == 2 and "--quick" in missing.output
+
+
+def test_packaged_curricula_by_name_from_any_directory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from lanrocli.train.curriculum import packaged_curricula
+
+    monkeypatch.chdir(tmp_path)
+    named = runner.invoke(app, ["check", "reach"])
+    assert named.exit_code == 0, named.output
+    assert named.output == runner.invoke(app, ["check", str(packaged_curricula()["reach"])]).output
+    listed = runner.invoke(app, ["check"])
+    assert listed.exit_code == 0, listed.output
+    assert all(f"│ {name} " in listed.output for name in packaged_curricula())
+    for command in (["check", "pushh"], ["train", "pushh"]):
+        unknown = runner.invoke(app, command)
+        assert unknown.exit_code == 2, unknown.output
+        assert "pushh: no such file" in unknown.output and "grasp, lift, push, quick, reach" in unknown.output
+    assert not (tmp_path / "checkpoints").exists()
 
 
 def test_check_reports_every_problem_with_its_place_and_exits_2(tmp_path) -> None:
