@@ -25,6 +25,7 @@ from lanrocli import __version__
 from lanrocli.choices import Instruction, Task
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.language import all_sentences, grammar_vocabulary, sample_sentence, sentence_stats
+from lanrocli.options import Command
 
 if TYPE_CHECKING:
     from lanrocli.envs.evaluation import EvaluationReport
@@ -438,7 +439,11 @@ def _test_episodes(path: Path) -> int:
 CURRICULUM_HELP = "A YAML file, or the name of a curriculum that ships with lanro, such as push"
 
 
-@app.command("check")
+SETTINGS = "KEY=VALUE ..."
+"""The metavar of ``--set``: several settings may follow it."""
+
+
+@app.command("check", cls=Command)
 def check_command(
     curriculum: Annotated[
         str | None,
@@ -455,12 +460,18 @@ def check_command(
             help="Show the plan 'lanro train --quick' runs: the built-in curriculum as written, or FILE scaled down.",
         ),
     ] = False,
+    changes: Annotated[
+        list[str] | None,
+        typer.Option("--set", metavar=SETTINGS, help="KEY=VALUE changed in the plan shown, as 'lanro train --set' does."),
+    ] = None,
 ) -> None:
     """Validate a curriculum and print the resolved plan (stages, budgets, total steps) without training."""
     if curriculum is None and not quick:
+        if changes:
+            raise fail("--set needs the curriculum it applies to")
         _print_packaged()
         return
-    plan = _load_plan(curriculum, quick, None, None)
+    plan = _load_plan(curriculum, quick, None, None, changes or [])
     _print_plan(plan)
 
 
@@ -478,23 +489,32 @@ def _print_packaged() -> None:
     console.print("'lanro check NAME' shows one's plan, 'lanro train NAME' runs it", highlight=False)
 
 
-def _load_plan(path: str | None, quick: bool, seed: int | None, envs: int | None) -> Curriculum:
+def _load_plan(
+    path: str | None, quick: bool, seed: int | None, envs: int | None, changes: list[str] | None = None
+) -> Curriculum:
     """The curriculum to run, with the command line's overrides: the file or packaged curriculum ``path``
     names, scaled down by ``quick`` (to try a file out); without one, with ``quick``, the built-in
-    curriculum exactly as written (``curricula/quick.yaml``, whose budgets are small already)."""
+    curriculum exactly as written (``curricula/quick.yaml``, whose budgets are small already). Then the
+    ``--set`` settings ``changes``, so that they win over the scaling."""
     from lanrocli.train.curriculum import CurriculumError, builtin_curriculum, find_curriculum, load_curriculum
+    from lanrocli.train.overrides import SettingError, read_settings
 
     try:
+        settings = read_settings("--set", changes or [])
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", FutureWarning)
             plan = load_curriculum(find_curriculum(path)) if path is not None else builtin_curriculum()
         for warning in caught:
             err_console.print(f"[bold yellow]warning:[/] {escape(f'{path}: {warning.message}')}")
+        if quick and path is not None:
+            plan = plan.quick()
+        if settings:
+            plan = plan.with_settings(settings, path or "curricula/quick.yaml")
+    except SettingError as error:
+        raise fail(str(error)) from None
     except CurriculumError as error:
         count = len(error.problems)
         raise fail(f"{count} problem{'s' if count > 1 else ''} in the curriculum:\n{error}") from None
-    if quick and path is not None:
-        plan = plan.quick()
     return plan.with_overrides(seed=seed, envs=envs)
 
 
@@ -534,7 +554,7 @@ def _print_plan(plan: Curriculum) -> None:
     console.print(f"{plan.updates_per_step:g} update(s) per environment step, from step {plan.learning_starts:,}")
 
 
-@app.command("train")
+@app.command("train", cls=Command)
 def train_command(
     curriculum: Annotated[
         str | None,
@@ -557,12 +577,23 @@ def train_command(
             "learns. With a file: that file with every budget and evaluation scaled down, to try it out.",
         ),
     ] = False,
+    changes: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set",
+            metavar=SETTINGS,
+            help="KEY=VALUE changed in the curriculum, by its key paths as its error messages name them, the value "
+            "read as YAML: agent.critics=2 'stages[0].budget.steps=5000'.",
+        ),
+    ] = None,
 ) -> None:
     """Train an agent through a curriculum of stages, with evaluation, checkpoints and resume."""
     if curriculum is None and not quick and not resume:
         raise fail("give a curriculum (a YAML file, or a packaged one by name: 'lanro check' lists them), or --quick "
                    "for the built-in one")
-    plan = None if curriculum is None and resume and not quick else _load_plan(curriculum, quick, seed, envs)
+    if curriculum is None and not quick and changes:
+        raise fail("--set needs the curriculum it applies to; a resumed run keeps the settings it started with")
+    plan = None if curriculum is None and resume and not quick else _load_plan(curriculum, quick, seed, envs, changes)
 
     # Only now: a bad curriculum is refused without waiting for torch and pybullet to load.
     import torch
@@ -600,7 +631,14 @@ def train_command(
             run.close()
         Console().print(f"the run in {out} has finished already; see {out / 'report.md'}")
         return
-    resume_hint = "lanro train " + (f"{curriculum} " if curriculum else "") + ("--quick " if quick else "") + f"--out {out} --resume"
+    again = [
+        *([curriculum] if curriculum else []),
+        *(["--quick"] if quick else []),
+        *(["--seed", str(seed)] if seed is not None else []),
+        *(["--envs", str(envs)] if envs is not None else []),
+        *(arg for change in changes or [] for arg in ("--set", change)),
+    ]
+    resume_hint = shlex.join(["lanro", "train", *again]) + f" --out {out} --resume"
     with StopRequest() as stop:
         try:
             with display:
@@ -658,33 +696,7 @@ def plot_command(
     Console().print(f"wrote {path}")
 
 
-class _ManyValues(typer.core.TyperCommand):
-    """Lets ``--seeds 0 1 2`` and ``--set a=1 b=2`` give several values after one option, as well as the usual
-    ``--seeds 0 --seeds 1``: each further value is read as if the option stood before it again."""
-
-    MANY: dict[str, Callable[[str], bool]] = {
-        "--seeds": lambda text: text.replace(",", "").isdigit(),
-        "--set": lambda text: "=" in text,
-        "--grid": lambda text: "=" in text,
-    }
-
-    def parse_args(self, ctx: typer.Context, args: list[str]) -> list[str]:
-        spread: list[str] = []
-        option, own_value = None, False
-        for arg in args:
-            if own_value:
-                spread.append(arg)
-                own_value = False
-            elif option is not None and not arg.startswith("-") and self.MANY[option](arg):
-                spread += [option, arg]
-            else:
-                option = arg if arg in self.MANY else None
-                own_value = option is not None
-                spread.append(arg)
-        return super().parse_args(ctx, spread)
-
-
-@app.command("sweep", cls=_ManyValues)
+@app.command("sweep", cls=Command)
 def sweep_command(
     curriculum: Annotated[
         str | None,
@@ -701,7 +713,7 @@ def sweep_command(
     ] = None,
     changes: Annotated[
         list[str] | None,
-        typer.Option("--set", metavar="KEY=VALUE ...", help="KEY=VALUE changed for every trial, by the curriculum's key paths: agent.critics=2."),
+        typer.Option("--set", metavar=SETTINGS, help="KEY=VALUE changed for every trial, by the curriculum's key paths: agent.critics=2."),
     ] = None,
     grid: Annotated[
         list[str] | None,
@@ -741,6 +753,7 @@ def sweep_command(
     """Run a curriculum over seeds, settings and grids of settings on Ray: one ordinary run folder per trial."""
     from lanrocli.sweep import plan as sweeps
     from lanrocli.train.curriculum import CurriculumError
+    from lanrocli.train.overrides import SettingError
 
     spec = None
     if curriculum is not None or quick:
@@ -749,7 +762,7 @@ def sweep_command(
             spec = sweeps.SweepSpec.from_options(
                 base, str(curriculum or "curricula/quick.yaml"), quick, seeds or [], changes or [], grid or []
             )
-        except sweeps.SweepError as error:
+        except (sweeps.SweepError, SettingError) as error:
             raise fail(str(error)) from None
     elif not resume:
         raise fail("give a curriculum (a YAML file, or a packaged one by name: 'lanro check' lists them), --quick for "

@@ -225,6 +225,22 @@ def test_packaged_curricula_by_name_from_any_directory(tmp_path: Path, monkeypat
     assert not (tmp_path / "checkpoints").exists()
 
 
+def test_set_changes_the_plan_of_check_and_train_and_a_bad_key_is_located(tmp_path: Path) -> None:
+    shown = runner.invoke(app, ["check", "quick", "--set", "eval.episodes=7", "stages[0].budget.steps=99"])
+    assert shown.exit_code == 0, shown.output
+    assert "7 fresh episodes" in shown.output and "99 steps" in shown.output
+    out = tmp_path / "run"
+    for command in (["check", "quick"], ["train", "quick", "--out", str(out)]):
+        bad = runner.invoke(app, [*command, "--set", "eval.episodes=3", "agent.critcs=2"])
+        assert bad.exit_code == 2, bad.output
+        assert "--set agent.critcs=2: agent.critcs: unknown key 'critcs'; did you mean 'critics'?" in bad.output
+        malformed = runner.invoke(app, [*command, "--set", "critics"])
+        assert malformed.exit_code == 2 and "--set critics: expected KEY=VALUE" in malformed.output
+    assert not out.exists()
+    alone = runner.invoke(app, ["check", "--set", "eval.episodes=3"])
+    assert alone.exit_code == 2 and "--set needs the curriculum" in alone.output
+
+
 def test_check_reports_every_problem_with_its_place_and_exits_2(tmp_path) -> None:
     path = tmp_path / "bad.yaml"
     path.write_text(

@@ -24,6 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, create_model,
 from lanrocli.agent.settings import MOVED, BufferSettings, SACSettings
 from lanrocli.choices import Task
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.train.overrides import apply_settings
 from lanrocli.train.seeds import FIELD
 from lanrocli.train.yamlfile import CurriculumError, Problem, parse, read, validate
 
@@ -267,6 +268,13 @@ class Curriculum(BaseModel):
         data["learning_starts"] = min(data["learning_starts"], 256)
         data["buffer"]["size"] = min(data["buffer"]["size"], 100_000)
         return validate(Curriculum, data, {}, "<quick>")
+
+    def with_settings(self, settings: dict[str, Any], source: str) -> Curriculum:
+        """A copy with ``--set`` settings (key path -> value), checked like the file's: each problem is
+        located at the setting that caused it, or else named by ``source`` (the curriculum as the command
+        line named it) and the settings."""
+        changes = [("--set", key, value) for key, value in settings.items()]
+        return apply_settings(Curriculum, self.model_dump(mode="json"), changes, source)
 
     def with_overrides(self, seed: int | None = None, envs: int | None = None) -> Curriculum:
         """A copy with the command line's settings, checked like the file's."""
