@@ -22,10 +22,10 @@ from rich.markup import escape
 from rich.table import Table
 
 from lanrocli import __version__
-from lanrocli.choices import Instruction, Task
-from lanrocli.envs.settings import EnvSettings
+from lanrocli.choices import Instruction, Task, check_device
+from lanrocli.envs.settings import CORRECTION_LIMIT, EnvSettings
 from lanrocli.language import all_sentences, grammar_vocabulary, sample_sentence, sentence_stats
-from lanrocli.options import Command
+from lanrocli.options import Command, Group
 
 if TYPE_CHECKING:
     from lanrocli.envs.evaluation import EvaluationReport
@@ -37,7 +37,7 @@ app = typer.Typer(
     name="lanro",
     help="Train and evaluate a simulated Panda arm that follows language instructions and recovers from corrections.",
     no_args_is_help=True,
-    add_completion=False,
+    cls=Group,
     pretty_exceptions_enable=False,
 )
 
@@ -67,7 +67,17 @@ def main(
     """Train and evaluate a simulated Panda arm that follows language instructions and recovers from corrections."""
 
 
-@app.command("sample-instructions")
+def _device(value: str | None) -> str | None:
+    """Every command's ``--device``, checked by name before anything loads, as ``pick_device`` checks it."""
+    if value is not None:
+        try:
+            check_device(value)
+        except ValueError as error:
+            raise fail(str(error)) from None
+    return value
+
+
+@app.command("sample-instructions", cls=Command)
 def sample_instructions(
     task: Annotated[Task, typer.Option(help="Task whose verbs the instructor uses.")] = Task.REACH,
     n: Annotated[int, typer.Option("--n", min=1, help="How many sentences to sample.")] = 10,
@@ -222,26 +232,31 @@ def _is_list(hint: Any) -> bool:
     return typing.get_origin(_without_none(hint)) is tuple
 
 
-def _with_env_options(command: Callable[..., None]) -> Callable[..., None]:
-    """Give ``command`` one option per ``EnvSettings`` field, from the field's type and ``help``: typer reads
-    the signature, and the command receives them in its ``**env_options``, None where not given."""
-    signature = inspect.signature(command, eval_str=True)
-    hints = typing.get_type_hints(EnvSettings)
-    options = [
-        inspect.Parameter(
-            f.name,
-            inspect.Parameter.KEYWORD_ONLY,
-            default=None,
-            annotation=Annotated[
-                (str if _is_list(hints[f.name]) else _without_none(hints[f.name])) | None,
-                typer.Option(help=f.metadata["help"]),
-            ],
-        )
-        for f in dataclasses.fields(EnvSettings)
-    ]
-    kept = [p for p in signature.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
-    command.__signature__ = signature.replace(parameters=kept + options)  # type: ignore[attr-defined]
-    return command
+def _with_env_options(**helps: str) -> Callable[[Callable[..., None]], Callable[..., None]]:
+    """Give a command one option per ``EnvSettings`` field, from the field's type and ``help`` (or the one
+    ``helps`` gives it, where the command reads the setting its own way): typer reads the signature, and the
+    command receives them in its ``**env_options``, None where not given."""
+
+    def add_options(command: Callable[..., None]) -> Callable[..., None]:
+        signature = inspect.signature(command, eval_str=True)
+        hints = typing.get_type_hints(EnvSettings)
+        options = [
+            inspect.Parameter(
+                f.name,
+                inspect.Parameter.KEYWORD_ONLY,
+                default=None,
+                annotation=Annotated[
+                    (str if _is_list(hints[f.name]) else _without_none(hints[f.name])) | None,
+                    typer.Option(help=helps.get(f.name, f.metadata["help"])),
+                ],
+            )
+            for f in dataclasses.fields(EnvSettings)
+        ]
+        kept = [p for p in signature.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
+        command.__signature__ = signature.replace(parameters=kept + options)  # type: ignore[attr-defined]
+        return command
+
+    return add_options
 
 
 def _env_changes(options: dict[str, Any]) -> dict[str, Any]:
@@ -262,8 +277,8 @@ def _env_changes(options: dict[str, Any]) -> dict[str, Any]:
     return changes
 
 
-@app.command("eval")
-@_with_env_options
+@app.command("eval", cls=Command)
+@_with_env_options()
 def evaluate_command(
     what: Annotated[
         str,
@@ -293,7 +308,10 @@ def evaluate_command(
             "object on the table (other; success is the task on that object).",
         ),
     ] = Instruction.TRUE,
-    device: Annotated[str | None, typer.Option(help="cpu or cuda for a trained agent (default: cuda if available).")] = None,
+    device: Annotated[
+        str | None,
+        typer.Option(callback=_device, help="cpu, cuda or cuda:N for a trained agent (default: cuda if available)."),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
     gif: Annotated[Path | None, typer.Option(help="Write the first episodes as an animated GIF here.")] = None,
     correction_test: Annotated[
@@ -308,9 +326,11 @@ def evaluate_command(
     ] = False,
     **env_options: Any,
 ) -> None:
-    """Evaluate a scripted policy or a trained agent: success overall, on correction episodes, where a correction
-    was spoken, per kind and form of correction, with 95% intervals. For a checkpoint, the environment defaults
-    to the stage it was trained on and the episodes to that stage's held-out test episodes; options change them."""
+    """Evaluate a scripted policy or a trained agent, overall and per kind and form of correction.
+
+    Success on all episodes, on correction episodes, where a correction was spoken, per kind and form of
+    correction, with 95% intervals. For a checkpoint, the environment defaults to the stage it was trained on
+    and the episodes to that stage's held-out test episodes; options change them."""
     from lanrocli.envs.env import LanroEnv
     from lanrocli.envs.evaluation import evaluate
     from lanrocli.envs.policies import make_policy
@@ -567,7 +587,9 @@ def train_command(
     out: Annotated[Path | None, typer.Option(help="Run folder (default: checkpoints/<curriculum name>).")] = None,
     seed: Annotated[int | None, typer.Option(min=0, help="Override the curriculum's seed.")] = None,
     envs: Annotated[int | None, typer.Option(min=1, max=64, help="Override the number of parallel environments.")] = None,
-    device: Annotated[str | None, typer.Option(help="cpu or cuda (default: cuda if available).")] = None,
+    device: Annotated[
+        str | None, typer.Option(callback=_device, help="cpu, cuda or cuda:N (default: cuda if available).")
+    ] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the run in --out where it stopped.")] = False,
     quick: Annotated[
         bool,
@@ -672,7 +694,7 @@ def train_command(
     console.print(f"run folder: {out}\nnext, try:", *lines, sep="\n", markup=False, highlight=False)
 
 
-@app.command("plot")
+@app.command("plot", cls=Command)
 def plot_command(
     runs: Annotated[
         list[Path],
@@ -821,7 +843,7 @@ def sweep_command(
     console.print(f"next: lanro report {shlex.quote(str(out))}   lanro plot {shlex.quote(str(out))} --out curves.png", markup=False, highlight=False)
 
 
-@app.command("report")
+@app.command("report", cls=Command)
 def report_command(
     runs: Annotated[list[Path], typer.Argument(help="Run folders or sweep folders.")],
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
@@ -859,8 +881,11 @@ def report_command(
         typer.echo(text, nl=False)
 
 
-@app.command("play")
-@_with_env_options
+@app.command("play", cls=Command)
+@_with_env_options(
+    max_episode_steps=f"Steps per episode (default: {CORRECTION_LIMIT}, as for a correction episode: any episode "
+    "may be corrected)."
+)
 def play_command(
     checkpoint: Annotated[
         Path,
@@ -879,7 +904,9 @@ def play_command(
     steps_per_line: Annotated[
         int, typer.Option(min=1, help="Steps the agent acts before each further line is read.")
     ] = 10,
-    device: Annotated[str | None, typer.Option(help="cpu or cuda (default: cuda if available).")] = None,
+    device: Annotated[
+        str | None, typer.Option(callback=_device, help="cpu, cuda or cuda:N (default: cuda if available).")
+    ] = None,
     gif: Annotated[
         Path | None, typer.Option(help="Folder for one GIF per episode (episode-1.gif, ...), captioned with the sentence.")
     ] = None,
@@ -891,7 +918,7 @@ def play_command(
     Each episode draws a scene from the checkpoint's stage (options change it) and shows its objects; the next line
     is the instruction. The agent then acts --steps-per-line steps before each further line: text is a correction,
     appended to the instruction as the instructor does (a later one replaces it), and an empty line lets it go on.
-    An episode lasts 100 steps (--max-episode-steps) and ends sooner when the task holds for the object the sentence
+    An episode lasts --max-episode-steps steps and ends sooner when the task holds for the object the sentence
     singles out; the next line is the next episode's instruction. Unknown words are named and read as <unk>;
     a sentence outside the grammar is flagged and read all the same.
 
