@@ -70,6 +70,20 @@ class CorrectionForm(StrEnum):
     EDIT = "edit"
 
 
+class Split(StrEnum):
+    """A generalisation split: episodes built from what a curriculum's ``holdout`` kept out of training,
+    each testing one thing the agent can only have understood, not memorised (docs/generalisation.md)."""
+
+    PAIRS = "pairs"
+    """The goal is a colour-shape combination never on the table in training."""
+    CORRECTION_WORDS = "correction_words"
+    """Every correction uses a shape word heard in instructions only, never inside a correction."""
+    LATE_CORRECTIONS = "late_corrections"
+    """Corrections arrive later after the mistake than any in training."""
+    COMMON_GROUND = "common_ground"
+    """The instruction's rare colour word was never heard in training."""
+
+
 class Instruction(StrEnum):
     """Which sentence the agent reads during an episode: the check that it follows language at all.
 

@@ -22,7 +22,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from lanrocli import __version__
-from lanrocli.choices import Instruction, Task, check_device
+from lanrocli.choices import Instruction, Split, Task, check_device
 from lanrocli.envs.settings import CORRECTION_LIMIT, EnvSettings
 from lanrocli.language import all_sentences, grammar_vocabulary, sample_sentence, sentence_stats
 from lanrocli.options import Command, Group
@@ -324,6 +324,13 @@ def evaluate_command(
             "--episodes caps the episodes.",
         ),
     ] = False,
+    split: Annotated[
+        Split | None,
+        typer.Option(
+            help="A trained agent on one generalisation split of its run's holdout (docs/generalisation.md), on the "
+            "split's own held-out episodes, as its run measured it; --episodes sets how many (default: test.episodes).",
+        ),
+    ] = None,
     **env_options: Any,
 ) -> None:
     """Evaluate a scripted policy or a trained agent, overall and per kind and form of correction.
@@ -339,7 +346,12 @@ def evaluate_command(
     if correction_test and (seed is not None or instruction is not Instruction.TRUE or gif is not None):
         raise fail("--correction-test runs episodes of its own, as the sentence the instructor speaks; leave out "
                    "--seed, --instruction and --gif")
+    if split is not None and (correction_test or seed is not None or instruction is not Instruction.TRUE or gif or changes):
+        raise fail("--split runs the split's own episodes and settings; leave out --correction-test, --seed, "
+                   "--instruction, --gif and the environment options")
     if what in {p.value for p in PolicyName}:
+        if split is not None:
+            raise fail("--split measures a trained agent on what its run held out; a scripted policy has no run")
         if correction_test:
             raise fail(
                 "--correction-test measures a trained agent on its run's held-out seeds; a scripted policy has none"
@@ -359,6 +371,12 @@ def evaluate_command(
             env.close()
         record = {"policy": what, "task": task_name, "env": env_settings.to_dict(), **report.as_dict()}
         where = f"seed {first}"
+    elif split is not None:
+        measurement = _measure_checkpoint(Path(what), task, device, _split_test(Path(what), split, episodes))
+        report, record, task_name, env_settings = (
+            measurement.report, measurement.record, measurement.settings.task, measurement.env
+        )
+        where = f"the {split.value} split's held-out episodes"
     elif correction_test:
         measurement = _measure_checkpoint(Path(what), task, device, _correction_test(Path(what), changes, episodes))
         report, record, task_name, env_settings = (
@@ -416,6 +434,16 @@ def _correction_test(path: Path, overrides: dict[str, Any], episodes: int | None
         if episodes is not None:
             quota = dataclasses.replace(quota, episodes=episodes)
         return correction_test(path, quota, device, overrides, check=check)
+
+    return run
+
+
+def _split_test(path: Path, split: Split, episodes: int | None) -> Measure:
+    """The checkpoint at ``path`` on one generalisation split of its run's holdout."""
+    from lanrocli.train.testset import split_test
+
+    def run(device: Any, check: Check) -> Measurement:
+        return split_test(path, split, episodes or _test_episodes(path), device, check=check)
 
     return run
 

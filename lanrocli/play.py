@@ -50,7 +50,7 @@ from lanrocli.envs.tasks import make_task
 from lanrocli.language import (
     BEGINNING_WORDS,
     COLOURS,
-    RARE_COLOUR_WORDS,
+    RARE_WORD_COLOURS,
     SHAPE_WORDS,
     TASK_VERBS,
     ObjectProps,
@@ -64,7 +64,7 @@ from lanrocli.sim import CONTROL_DT
 from lanrocli.train.runfolder import CheckpointError
 from lanrocli.train.trainer import AgentPolicy, load_policy, pick_device
 
-COLOUR_OF_WORD: Mapping[str, str] = {**{c: c for c in COLOURS}, **{w: c for c, w in RARE_COLOUR_WORDS.items()}}
+COLOUR_OF_WORD: Mapping[str, str] = {**{c: c for c in COLOURS}, **RARE_WORD_COLOURS}
 """Every word that names a colour (common and rare), to the colour it names."""
 
 SHAPE_OF_WORD: Mapping[str, str] = {w: shape for shape, words in SHAPE_WORDS.items() for w in words}

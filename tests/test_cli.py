@@ -134,12 +134,12 @@ def test_stats_match_hand_counts() -> None:
         app, ["sample-instructions", "--all", "--corrections", "--negations", "--rare", "--stats", "--json"]
     )
     stats = json.loads(result.output)
-    # 3 verbs x (18 colour words x 9 shape words + 9 shape words + 18 colour words) = 567 instructions;
+    # 3 verbs x (27 colour words x 9 shape words + 9 shape words + 27 colour words) = 837 instructions;
     # 6 beginnings x (9 x 9 + 9 + 9) = 594 corrections.
-    assert stats["sentences"] == stats["distinct_sentences"] == 567 * 594
-    assert stats["vocabulary_size"] == 52 and stats["max_length"] == 10
-    assert stats["by_form"] == {"colour_shape": 486 * 594, "shape": 27 * 594, "colour": 54 * 594}
-    assert stats["by_beginning"] == {"excuse": 567 * 4 * 99, "negation": 567 * 99, "edit": 567 * 99}
+    assert stats["sentences"] == stats["distinct_sentences"] == 837 * 594
+    assert stats["vocabulary_size"] == 61 and stats["max_length"] == 10
+    assert stats["by_form"] == {"colour_shape": 729 * 594, "shape": 27 * 594, "colour": 81 * 594}
+    assert stats["by_beginning"] == {"excuse": 837 * 4 * 99, "negation": 837 * 99, "edit": 837 * 99}
 
 
 def test_bad_task_is_a_clear_error() -> None:

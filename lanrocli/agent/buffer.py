@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from lanrocli.agent.relabel import sentence_pool
+from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.language import TASKS, ObjectProps, Vocabulary, check_task, grammar_vocabulary
 from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 
@@ -134,7 +135,7 @@ class ReplayBuffer:
 
     ``pool_rows``: relabelling sentences drawn per object and style when an episode is added (fewer for
     episodes shorter than that, as the pool is stored in the episode's own slots). ``negations``: whether
-    corrected relabelling sentences may use ``not``. ``seed`` drives those draws; the generator's state is
+    corrected relabelling sentences may use ``not``; ``holdout``: what they may never say. ``seed`` drives those draws; the generator's state is
     saved with the buffer so a resumed run draws the same sentences.
 
     The arrays are allocated with ``np.zeros``, which the operating system backs with memory only as slots
@@ -151,6 +152,7 @@ class ReplayBuffer:
         pool_rows: int = 16,
         negations: bool = True,
         seed: int = 0,
+        holdout: Holdout = NOTHING_HELD_OUT,
     ) -> None:
         vocabulary = vocabulary if vocabulary is not None else grammar_vocabulary()
         if len(vocabulary) > np.iinfo(np.uint8).max + 1:
@@ -164,6 +166,7 @@ class ReplayBuffer:
         self.vocabulary = vocabulary
         self.pool_rows = pool_rows
         self.negations = negations
+        self.holdout = holdout
         self.rng = np.random.default_rng(seed)
         self.position = 0  # next slot to write
         self.high = 0  # one past the highest slot ever written: samples are drawn below it
@@ -223,7 +226,7 @@ class ReplayBuffer:
         d["episode_length"][lo:hi] = steps
 
         rows = min(steps, self.pool_rows)
-        pool = sentence_pool(episode.task, objects, rows, self.vocabulary, self.negations, self.rng)
+        pool = sentence_pool(episode.task, objects, rows, self.vocabulary, self.negations, self.rng, self.holdout)
         d["identifiable"][lo:hi] = False
         d["identifiable"][lo:hi, :n] = pool.identifiable
         d["plain_pool"][lo:hi] = 0
@@ -466,6 +469,7 @@ class ReplayBuffer:
             "vocabulary": self.vocabulary.to_dict(),
             "pool_rows": self.pool_rows,
             "negations": self.negations,
+            "holdout": self.holdout.to_dict(),
             "position": self.position,
             "high": self.high,
             "size": self.size,
@@ -488,6 +492,7 @@ class ReplayBuffer:
             vocabulary=Vocabulary.from_dict(meta["vocabulary"]),
             pool_rows=meta["pool_rows"],
             negations=meta["negations"],
+            holdout=Holdout.from_dict(meta.get("holdout")),
         )
         high = meta["high"]
         for name, array in buffer.data.items():

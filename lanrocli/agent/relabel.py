@@ -39,6 +39,7 @@ from lanrocli.language import (
     instruction,
 )
 from lanrocli.language.dialogue import candidates, naming_phrases, negation_phrases, opening_phrases
+from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 
 _DRAWS_PER_SENTENCE = 7
 """Uniform numbers a sentence's choices need at most (verb, kind, named object, opening phrase, form,
@@ -55,6 +56,8 @@ class _Scene:
     """One scene's phrase lists, each computed once however many sentences are drawn from it."""
 
     objects: Sequence[ObjectProps]
+    holdout: Holdout = NOTHING_HELD_OUT
+    """What training never hears: no relabelled sentence says it either."""
 
     def __post_init__(self) -> None:
         self._cache: dict[tuple, list[Phrase]] = {}
@@ -65,16 +68,18 @@ class _Scene:
         ))
 
     def openings(self, kind: Kind, target: int, named: int | None) -> list[Phrase]:
-        return self._get(("opening", kind, target, named), lambda: opening_phrases(kind, self.objects, target, named))
+        return self._get(("opening", kind, target, named), lambda: self.holdout.instruction_phrases(
+            opening_phrases(kind, self.objects, target, named), None
+        ))
 
     def negations(self, kind: Kind, phrase: Phrase, target: int, touched: int) -> list[Phrase]:
-        return self._get(("not", kind, phrase, target, touched), lambda: negation_phrases(
-            self.objects, target, touched, candidates(kind, phrase, self.objects)
+        return self._get(("not", kind, phrase, target, touched), lambda: self.holdout.correction_phrases(
+            negation_phrases(self.objects, target, touched, candidates(kind, phrase, self.objects)), None
         ))
 
     def naming(self, kind: Kind, phrase: Phrase, target: int) -> list[Phrase]:
-        return self._get(("name", kind, phrase, target), lambda: naming_phrases(
-            self.objects, target, candidates(kind, phrase, self.objects)
+        return self._get(("name", kind, phrase, target), lambda: self.holdout.correction_phrases(
+            naming_phrases(self.objects, target, candidates(kind, phrase, self.objects)), None
         ))
 
     def _get(self, key: tuple, compute) -> list[Phrase]:  # type: ignore[no-untyped-def]
@@ -135,12 +140,14 @@ def sentence_pool(
     vocabulary: Vocabulary,
     negations: bool,
     rng: np.random.Generator,
+    holdout: Holdout = NOTHING_HELD_OUT,
 ) -> SentencePool:
     """``rows`` plain sentences for every identifiable object of the scene, and ``rows`` corrected ones for
-    every pair of an identifiable target and another object the arm may have acted on first."""
+    every pair of an identifiable target and another object the arm may have acted on first; none of them
+    says a word ``holdout`` keeps out of training."""
     verbs = TASK_VERBS[task]
     n = len(objects)
-    scene = _Scene(objects)
+    scene = _Scene(objects, holdout)
     plain = np.zeros((rows, n, vocabulary.max_length), dtype=np.uint8)
     corrected = np.zeros((rows, n, n, vocabulary.max_length), dtype=np.uint8)
     identifiable = np.array([bool(scene.identifying(k)) for k in range(n)], dtype=bool)

@@ -7,12 +7,13 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from lanrocli.choices import Kind
+from lanrocli.choices import Kind, Split
 from lanrocli.envs.instructor import Instructor
-from lanrocli.envs.scene import Scene, sample_scene
+from lanrocli.envs.scene import Scene, check_scenes, sample_scene
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.tasks import TaskView, make_task
 from lanrocli.language import COLOURS, SHAPES, Vocabulary, grammar_vocabulary
+from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.reward import reward
 from lanrocli.sim import (
     MAX_FINGER_WIDTH,
@@ -109,11 +110,14 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         render_mode: str | None = None,
         gui: bool = False,
         vocabulary: Vocabulary | None = None,
+        holdout: Holdout = NOTHING_HELD_OUT,
+        split: Split | None = None,
         time_limit: bool = True,
         **changes: Any,
     ) -> None:
         """``settings`` (default: ``EnvSettings()``), with any of its fields changed by keyword, as
-        ``gymnasium.make("lanro/Push-v0", objects=3)`` passes them.
+        ``gymnasium.make("lanro/Push-v0", objects=3)`` passes them. ``holdout``: what the episodes never
+        contain, except, with ``split``, the part held out for that generalisation split.
 
         ``time_limit=False`` leaves truncation by steps to a ``gymnasium.wrappers.TimeLimit`` around the
         environment (``max_episode_steps`` is then None): ``gymnasium.make`` adds one with the limit asked
@@ -146,7 +150,10 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.world = World(gui=gui)
         self.robot = Panda(self.world, gripper=self.task.gripper)
         self.objects = ObjectSet(self.world)
-        self.instructor = Instructor(self.task.name, settings.instructor)
+        split = None if split is None else Split(split)
+        check_scenes(settings.mode, objects, holdout, split)
+        self.holdout, self.split = holdout, split
+        self.instructor = Instructor(self.task.name, settings.instructor, holdout, split)
         self._scene: Scene | None = None
         self._start_positions = np.zeros((objects, 3))
         self._heights = np.zeros(objects)
@@ -177,6 +184,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self._spacing,
             need_shared=challenge is Kind.AMBIGUITY,
             need_same_shape=challenge is Kind.COMMON_GROUND,
+            holdout=self.holdout,
+            split=self.split,
         )
         self._scene = scene
         self.task.reset(rng)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lanrocli.choices import CorrectionForm, Kind
+from lanrocli.choices import CorrectionForm, Kind, Split
 from lanrocli.language import (
     BEGINNING_WORDS,
     NAMING_FORMS,
@@ -26,6 +26,7 @@ from lanrocli.language import (
     instruction,
     pick,
 )
+from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.language.dialogue import candidates, naming_phrases, negation_phrases, opening_phrases
 from lanrocli.envs.scene import Scene
 
@@ -110,6 +111,9 @@ class Instructor:
 
     task: str
     settings: InstructorSettings
+    holdout: Holdout = NOTHING_HELD_OUT
+    """What training never hears; with ``split``, the split whose episodes this instructor speaks in."""
+    split: Split | None = None
     challenge: Kind | None = field(default=None, init=False)
     instruction_text: str = field(default="", init=False)
     spoken: Correction | None = field(default=None, init=False)
@@ -120,6 +124,7 @@ class Instructor:
 
     def __post_init__(self) -> None:
         check_task(self.task)
+        self.holdout.check_split(self.split)
 
     @property
     def text(self) -> str:
@@ -134,11 +139,12 @@ class Instructor:
 
     def start(self, rng: np.random.Generator, scene: Scene, challenge: Kind | None) -> None:
         self._scene, self.challenge, self.spoken, self._trigger = scene, challenge, None, None
-        self._delay = int(rng.integers(self.settings.max_delay + 1))
+        first, last = self.holdout.delays(self.settings.max_delay, self.split)
+        self._delay = int(rng.integers(first, last + 1))
         named = None
         if challenge is Kind.INSTRUCTION_CORRECTION:
             named = pick(rng, [i for i in range(len(scene.objects)) if i != scene.goal_index])
-        phrases = opening_phrases(challenge, scene.objects, scene.goal_index, named)
+        phrases = self.holdout.instruction_phrases(opening_phrases(challenge, scene.objects, scene.goal_index, named), self.split)
         if not phrases:
             name = challenge.value if challenge else "plain"
             raise RuntimeError(f"no {name} instruction exists for goal {scene.goal} among {scene.others(scene.goal_index)}")
@@ -179,10 +185,11 @@ class Instructor:
         considered = candidates(self.challenge, self._phrase, objects)
         form = self._form(rng)
         if form is CorrectionForm.NEGATION:
-            negations = negation_phrases(objects, goal, touched, considered)
+            negations = self.holdout.correction_phrases(negation_phrases(objects, goal, touched, considered), self.split)
             if negations:
                 text = correction(BEGINNING_WORDS[form][0], pick(rng, negations))
                 return Correction(self.challenge, form, text, step, triggered_at)
             form = pick(rng, NAMING_FORMS)
-        text = correction(pick(rng, BEGINNING_WORDS[form]), pick(rng, naming_phrases(objects, goal, considered)))
+        naming = self.holdout.correction_phrases(naming_phrases(objects, goal, considered), self.split)
+        text = correction(pick(rng, BEGINNING_WORDS[form]), pick(rng, naming))
         return Correction(self.challenge, form, text, step, triggered_at)

@@ -10,8 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lanrocli.choices import Mode
+from lanrocli.choices import Mode, Split
 from lanrocli.language import COLOURS, SHAPES, ObjectProps
+from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 
 
 SHAPE_MODE_COLOURS: tuple[str, ...] = ("red", "green", "blue")
@@ -42,7 +43,13 @@ class Scene:
 
 
 def sample_objects(
-    rng: np.random.Generator, mode: Mode, n_objects: int, need_shared: bool = False, need_same_shape: bool = False
+    rng: np.random.Generator,
+    mode: Mode,
+    n_objects: int,
+    need_shared: bool = False,
+    need_same_shape: bool = False,
+    holdout: Holdout = NOTHING_HELD_OUT,
+    split: Split | None = None,
 ) -> tuple[tuple[ObjectProps, ...], int]:
     """Distinct objects in observation order and the goal's index, obeying the at-most-one-shared-property rule.
 
@@ -58,10 +65,14 @@ def sample_objects(
     comes in at least three colours, so such an object always exists. Each request is met by swapping
     one drawn object for a qualifying one: two more draws from ``rng`` at most, so the draw stays cheap
     and episodes stay a function of the seed.
+
+    ``holdout`` and ``split`` narrow the catalogue: no held-out pair is drawn, except as the goal of the
+    ``pairs`` split, whose goal is always one (:func:`check_scenes` makes sure every draw can succeed).
     """
     catalogue = mode_catalogue(mode)
-    goal = catalogue[int(rng.integers(len(catalogue)))]
-    allowed = [o for o in catalogue if o.shared_properties(goal) <= 1]
+    goals = holdout.goals(catalogue, split)
+    goal = goals[int(rng.integers(len(goals)))]
+    allowed = [o for o in holdout.others(catalogue) if o.shared_properties(goal) <= 1]
     others = [allowed[i] for i in rng.choice(len(allowed), size=n_objects - 1, replace=False)]
     if need_shared and not any(o.shared_properties(goal) == 1 for o in others):
         _swap_in(rng, others, [o for o in allowed if o.shared_properties(goal) == 1])
@@ -70,6 +81,32 @@ def sample_objects(
     goal_index = int(rng.integers(n_objects))
     objects = others[:goal_index] + [goal] + others[goal_index:]
     return tuple(objects), goal_index
+
+
+def check_scenes(mode: Mode, n_objects: int, holdout: Holdout, split: Split | None = None) -> None:
+    """Raise a ValueError saying why, where ``holdout`` leaves a scene of ``mode`` without a valid goal: no
+    goal left to draw, or a goal without the other objects, or the object sharing a property with it, or
+    the object of its shape, that its episodes may need."""
+    catalogue = mode_catalogue(mode)
+    goals = holdout.goals(catalogue, split)
+    where = f"{mode.value} scenes of {n_objects} objects" + (f" in the {split.value} split" if split else "")
+    if not goals:
+        held = "holds out every object they may have" if split is None else "holds out none of their objects"
+        raise ValueError(f"it {held}, so {where} have no goal")
+    others = holdout.others(catalogue)
+    for goal in goals:
+        allowed = [o for o in others if o.shared_properties(goal) <= 1]
+        needs = {
+            f"{n_objects - 1} other objects": len(allowed) >= n_objects - 1,
+            "an object sharing a property with it (ambiguity)": any(o.shared_properties(goal) == 1 for o in allowed),
+            "an object of its shape (common ground)": any(o.shape == goal.shape for o in allowed),
+        }
+        missing = [need for need, met in needs.items() if not met]
+        if missing:
+            raise ValueError(
+                f"it leaves {where} with goal {goal.colour} {goal.shape} and no {missing[0]}: "
+                "hold out fewer pairs"
+            )
 
 
 def _swap_in(rng: np.random.Generator, others: list[ObjectProps], qualifying: list[ObjectProps]) -> None:
@@ -99,7 +136,9 @@ def sample_scene(
     min_distance: float,
     need_shared: bool = False,
     need_same_shape: bool = False,
+    holdout: Holdout = NOTHING_HELD_OUT,
+    split: Split | None = None,
 ) -> Scene:
-    objects, goal_index = sample_objects(rng, mode, n_objects, need_shared, need_same_shape)
+    objects, goal_index = sample_objects(rng, mode, n_objects, need_shared, need_same_shape, holdout, split)
     positions = sample_positions(rng, n_objects, area_low, area_high, min_distance)
     return Scene(objects, goal_index, positions)

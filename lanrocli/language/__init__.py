@@ -27,6 +27,7 @@ from lanrocli.language.grammar import (
 from lanrocli.language.properties import (
     COLOURS,
     RARE_COLOUR_WORDS,
+    RARE_WORD_COLOURS,
     SHAPE_WORDS,
     SHAPES,
     TASK_VERBS,
@@ -49,6 +50,7 @@ __all__ = [
     "COLOURS",
     "PAD_ID",
     "RARE_COLOUR_WORDS",
+    "RARE_WORD_COLOURS",
     "SHAPES",
     "SHAPE_WORDS",
     "TASKS",

@@ -85,7 +85,7 @@ class Phrase:
 def _colour_words(colour: str, rare: bool) -> tuple[tuple[str, bool], ...]:
     words = [(colour, False)]
     if rare:
-        words.append((RARE_COLOUR_WORDS[colour], True))
+        words.extend((word, True) for word in RARE_COLOUR_WORDS[colour])
     return tuple(words)
 
 

@@ -13,19 +13,24 @@ from lanrocli.choices import Task
 
 COLOURS: tuple[str, ...] = ("red", "green", "blue", "yellow", "purple", "orange", "pink", "cyan", "brown")
 
-# One rare word per colour for the "lack of common ground" case: a word that names the colour but that
-# an agent trained on the common words has likely never read.
-RARE_COLOUR_WORDS: dict[str, str] = {
-    "red": "scarlet",
-    "green": "emerald",
-    "blue": "azure",
-    "yellow": "lemon",
-    "purple": "violet",
-    "orange": "tangerine",
-    "pink": "rose",
-    "cyan": "turquoise",
-    "brown": "chestnut",
+# Rare words per colour for the "lack of common ground" case: words that name the colour but that an agent
+# trained on the common words has likely never read. Two per colour, so a curriculum can hold one of them
+# out of training (its ``holdout.common_ground``) and test what the paper means: a word the agent does not
+# share, resolved by a correction.
+RARE_COLOUR_WORDS: dict[str, tuple[str, ...]] = {
+    "red": ("scarlet", "crimson"),
+    "green": ("emerald", "jade"),
+    "blue": ("azure", "cobalt"),
+    "yellow": ("lemon", "amber"),
+    "purple": ("violet", "lilac"),
+    "orange": ("tangerine", "apricot"),
+    "pink": ("rose", "salmon"),
+    "cyan": ("turquoise", "teal"),
+    "brown": ("chestnut", "umber"),
 }
+
+RARE_WORD_COLOURS: dict[str, str] = {word: colour for colour, words in RARE_COLOUR_WORDS.items() for word in words}
+"""Each rare word to the colour it names."""
 
 SHAPES: tuple[str, ...] = ("cube", "cuboid", "cylinder")
 

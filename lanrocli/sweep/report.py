@@ -8,7 +8,8 @@ task and each stage, every figure is given as the mean over runs with its 95% st
 groups the first is the reference: for each other group, the probability that one of its runs beats one of
 the reference's (higher success, fewer steps), with its interval. The figures of one kind or form of
 correction are marked where some run heard fewer than ``JUDGED`` of them: shown, not judged. The last
-stage's correction test is aggregated like the test, its figures prefixed ``correction_test_``.
+stage's correction test is aggregated like the test, its figures prefixed ``correction_test_``, and so are
+the generalisation splits, each figure beside its drop from the in-distribution test.
 
 A run that has not ended every stage counts for the stages it has ended. Reading needs neither torch nor
 Ray, so a report is made in a moment on any machine that sees the folders.
@@ -28,10 +29,12 @@ import yaml
 from lanrocli.envs.figures import FIGURE, FIGURES, JUDGED, Figure
 from lanrocli.stats import CONFIDENCE, IQM_RUNS, REPS, Estimate, bootstrap, iqm, probability_of_improvement
 from lanrocli.sweep.groups import Group, group_runs
+from lanrocli.train.generalisation import SPLIT_FIGURES, SplitFigure, drop
 from lanrocli.train.runfolder import (
     CONFIG,
     CORRECTION_TEST,
     LATEST,
+    SPLITS,
     STATE_FILE,
     TEST,
     CheckpointError,
@@ -64,6 +67,32 @@ def _on_correction_test(figure: Figure) -> Reported:
     return Reported(f"correction test: {figure.label}", read, figure.split)
 
 
+def _on_split(figure: SplitFigure) -> Reported:
+    def read(test: dict[str, Any], agent: str) -> tuple[int, float | None]:
+        rate = figure.read(test[SPLITS][figure.split.value][agent]) if _has_split(test, figure, agent) else None
+        return (rate["episodes"], rate["success"]) if rate else (0, None)
+
+    return Reported(f"{figure.split.value} split: {figure.label}", read, False)
+
+
+def _split_drop(figure: SplitFigure) -> Reported:
+    """The points lost from the same agent's in-distribution figure, read as a rate so that it is shown in
+    points like the figures beside it."""
+
+    def read(test: dict[str, Any], agent: str) -> tuple[int, float | None]:
+        if not _has_split(test, figure, agent):
+            return 0, None
+        mine = figure.read(test[SPLITS][figure.split.value][agent])
+        points = drop(mine, figure.read(test[agent]))
+        return (0, None) if points is None or mine is None else (mine["episodes"], points / 100)
+
+    return Reported(f"{figure.split.value} split: drop of {figure.label} (points)", read, False)
+
+
+def _has_split(test: dict[str, Any], figure: SplitFigure, agent: str) -> bool:
+    return agent in test.get(SPLITS, {}).get(figure.split.value, {}) and agent in test
+
+
 _SPOKEN = [figure for figure in FIGURES if figure.name.startswith("corrected_")]
 """The figures of episodes in which a correction was spoken: all of them, per kind and per form. The rates
 of all episodes set up with a kind, which mix episodes with and without one, are not aggregated."""
@@ -72,9 +101,18 @@ METRICS: dict[str, Reported] = {
     **{name: _on_test(FIGURE[name]) for name in ("success", "correction_episode_success")},
     **{figure.name: _on_test(figure) for figure in _SPOKEN},
     **{f"{CORRECTION_TEST}_{figure.name}": _on_correction_test(figure) for figure in _SPOKEN},
+    **{
+        name: reported
+        for figure in SPLIT_FIGURES
+        for name, reported in (
+            (f"{figure.split.value}_{figure.name}", _on_split(figure)),
+            (f"{figure.split.value}_{figure.name}_drop", _split_drop(figure)),
+        )
+    },
 }
 """The test figures reported, by their names in ``metrics.csv`` (those of the last stage's correction test
-prefixed ``correction_test_``); a run without the figure (no such episode) does not count for it."""
+prefixed ``correction_test_``, those of the generalisation splits by the split's name, with their drops
+from the in-distribution figure); a run without the figure (no such episode) does not count for it."""
 
 
 class ReportError(ValueError):

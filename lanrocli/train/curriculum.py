@@ -22,11 +22,13 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, create_model, field_validator, model_validator
 
 from lanrocli.agent.settings import MOVED, BufferSettings, SACSettings
-from lanrocli.choices import Task
+from lanrocli.choices import Kind, Split, Task
+from lanrocli.envs.scene import check_scenes
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.language.holdout import Holdout
 from lanrocli.train.overrides import apply_settings
 from lanrocli.train.seeds import FIELD
-from lanrocli.train.yamlfile import CurriculumError, Problem, parse, read, validate
+from lanrocli.train.yamlfile import CurriculumError, KeyProblem, Problem, parse, read, validate
 
 __all__ = [
     "Curriculum",
@@ -171,6 +173,31 @@ class HeldOutConfig(BaseModel):
     episodes: int = Field(500, gt=0)
 
 
+class HoldoutConfig(BaseModel):
+    """What training never shows, tested at the end of the last stage: one generalisation split per key
+    given (``Holdout`` has the rules; docs/generalisation.md the reasons)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    pairs: list[str] = []
+    """Colour-shape pairs ("red cylinder") never on the table in training; the split's goal is one."""
+    correction_words: list[str] = []
+    """One shape word per shape, never inside a correction in training; the split's corrections use them."""
+    late_corrections: tuple[int, int] | None = None
+    """[first, last]: the delays of the split's corrections, all longer than any stage's max_delay."""
+    common_ground: list[str] = []
+    """Rare colour words never heard in training; the split's common-ground instructions use them."""
+
+    @field_validator("*")
+    @classmethod
+    def _key_accepted(cls, value: Any, info: ValidationInfo) -> Any:
+        Holdout.from_dict({info.field_name: value})
+        return value
+
+    def settings(self) -> Holdout:
+        return Holdout.from_dict(self.model_dump())
+
+
 class Curriculum(BaseModel):
     """A validated training plan. Build one with ``load_curriculum`` to get located error messages."""
 
@@ -190,6 +217,7 @@ class Curriculum(BaseModel):
     eval: EvalConfig = Field(default_factory=EvalConfig)
     test: HeldOutConfig = Field(default_factory=HeldOutConfig)
     stages: list[Stage]
+    holdout: HoldoutConfig = Field(default_factory=HoldoutConfig)
 
     @model_validator(mode="before")
     @classmethod
@@ -241,6 +269,41 @@ class Curriculum(BaseModel):
             except ValueError as error:
                 raise ValueError(f"stages[{index}].env: {error}") from None
         return stages
+
+    @field_validator("holdout")
+    @classmethod
+    def _holdout_fits_the_stages(cls, holdout: HoldoutConfig, info: ValidationInfo) -> HoldoutConfig:
+        """Every stage keeps a valid goal without the held-out part, and the last stage, where the splits
+        are tested, can make each split's episodes."""
+        stages: list[Stage] | None = info.data.get("stages")
+        if not stages:
+            return holdout
+        rules = holdout.settings()
+        for index, stage in enumerate(stages):
+            env = stage.env.settings()
+            try:
+                check_scenes(env.mode, env.objects, rules)
+            except ValueError as error:
+                raise KeyProblem(("pairs",), f"{error} (stages[{index}])") from None
+        if rules.late_corrections is not None:
+            longest = max(stage.env.settings().max_delay for stage in stages)
+            if rules.late_corrections[0] <= longest:
+                raise KeyProblem(
+                    ("late_corrections",),
+                    f"the split's first delay {rules.late_corrections[0]} is not longer than training's longest "
+                    f"max_delay {longest}; start it at {longest + 1} or more",
+                )
+        last = stages[-1].env.settings()
+        if rules.pairs:
+            try:
+                check_scenes(last.mode, last.objects, rules, Split.PAIRS)
+            except ValueError as error:
+                raise KeyProblem(("pairs",), f"{error}: the last stage, where the split is tested, needs a held-out pair it can put on the table") from None
+        if rules.common_ground and not last.rare_words:
+            raise KeyProblem(("common_ground",), "the last stage, where the split is tested, needs rare_words: true")
+        if rules.common_ground and Kind.COMMON_GROUND not in last.instructor.kinds:
+            raise KeyProblem(("common_ground",), "the last stage, where the split is tested, must allow the common_ground kind")
+        return holdout
 
     @property
     def max_objects(self) -> int:

@@ -32,7 +32,7 @@ from typing import Any, TypeVar
 
 import torch
 
-from lanrocli.choices import Instruction
+from lanrocli.choices import Instruction, Split
 from lanrocli.envs.evaluation import EvaluationReport
 from lanrocli.envs.figures import Rate, wilson_interval
 from lanrocli.train.curriculum import Curriculum, CurriculumError, Promote, Stage, diff_curricula, load_curriculum
@@ -41,6 +41,7 @@ from lanrocli.train.runfolder import (
     BEST,
     CONFIG,
     CORRECTION_TEST,
+    SPLITS,
     LANGUAGE,
     LAST,
     LATEST,
@@ -72,7 +73,7 @@ from lanrocli.train.runfolder import (
 from lanrocli.train.seeds import evaluation_seed
 from lanrocli.train.checkpoint import resolve_checkpoint
 from lanrocli.train.tensorboard import TensorBoard
-from lanrocli.train.testset import CORRECTION_QUOTA, Measurement, checkpoint_name, correction_test, measure
+from lanrocli.train.testset import CORRECTION_QUOTA, Measurement, checkpoint_name, correction_test, measure, split_test
 from lanrocli.train.trainer import Trainer, TrainSettings
 
 Loaded = TypeVar("Loaded")
@@ -354,7 +355,8 @@ class CurriculumRun:
     def _test(self, result: StageResult) -> None:
         """The stage's last and best agents on its held-out test episodes, read back from their
         checkpoints; the final agent of the run also with a blank and another object's sentence, and the last
-        stage's agents on the correction test, sized like the test (``CorrectionQuota.scaled``)."""
+        stage's agents on the correction test, sized like the test (``CorrectionQuota.scaled``), and on each
+        generalisation split of the run's holdout, as many episodes as the test."""
         stage = self.curriculum.stages[result.index]
         folder = self.out / stage_folder(result.index, stage.name)
         episodes = self.curriculum.test.episodes
@@ -372,11 +374,21 @@ class CurriculumRun:
             quota = CORRECTION_QUOTA.scaled(episodes)
             corrections = _once_per_agent(folder, agents, lambda path: correction_test(path, quota, device))
             record[CORRECTION_TEST] = _records(corrections)
-            for kind, measured in ((LANGUAGE, language), (CORRECTION_TEST, corrections)):
-                figures |= {f"{kind}/{name}": measurement.report.metrics() for name, measurement in measured.items()}
+            measured = {LANGUAGE: language, CORRECTION_TEST: corrections}
+            splits = self.trainer.settings.holdout.splits
+            if splits:
+                split_tests = {split.value: self._split_test(folder, agents, split) for split in splits}
+                record[SPLITS] = {split: _records(by_agent) for split, by_agent in split_tests.items()}
+                measured |= {f"{SPLITS}/{split}": by_agent for split, by_agent in split_tests.items()}
+            for kind, by_name in measured.items():
+                figures |= {f"{kind}/{name}": measurement.report.metrics() for name, measurement in by_name.items()}
         write_json(folder / TEST, record)
         write_report(self.out, self.curriculum, self.state)
         self._tensorboard.test(result.end, figures)
+
+    def _split_test(self, folder: Path, agents: list[str], split: Split) -> dict[str, Measurement]:
+        episodes, device = self.curriculum.test.episodes, self.trainer.device
+        return _once_per_agent(folder, agents, lambda path: split_test(path, split, episodes, device))
 
     def complete_tests(self) -> None:
         """Measure stages that ended but were not measured yet: a run killed while testing does it on resume."""
@@ -443,6 +455,7 @@ def _train_settings(curriculum: Curriculum) -> TrainSettings:
         buffer=curriculum.buffer.settings(),
         object_slots=curriculum.max_objects,
         stage=0,
+        holdout=curriculum.holdout.settings(),
     )
 
 

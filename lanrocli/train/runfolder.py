@@ -43,6 +43,7 @@ from typing import TYPE_CHECKING, Any
 
 from lanrocli.choices import Kind
 from lanrocli.envs.figures import ATTENTION, FIGURES, JUDGED, METRIC_NAMES, PHASES
+from lanrocli.train.generalisation import split_lines, with_interval
 
 if TYPE_CHECKING:
     from lanrocli.train.curriculum import Curriculum
@@ -58,6 +59,8 @@ LATEST = "latest"
 LANGUAGE = "language"
 """Key of ``test.json`` under which the last stage's final agent is measured with each ``Instruction``."""
 CORRECTION_TEST = "correction_test"
+SPLITS = "splits"
+"""The key of ``test.json`` holding the generalisation splits' records, by split and agent."""
 """Key of ``test.json`` under which the last stage's agents are measured by the correction test."""
 TMP_PREFIX = ".tmp-"
 LOCK = ".lock"
@@ -486,12 +489,15 @@ def _test_lines(tests: dict[int, tuple[str, dict[str, Any]]]) -> list[str]:
         ]
         for shown, r in language.items():
             overall = {"episodes": r["episodes"], "success": r["success"], "ci": r["success_ci"]}
-            lines.append(f"| {shown} | {_with_interval(overall)} |")
+            lines.append(f"| {shown} | {with_interval(overall)} |")
     corrections = next(
         (record[CORRECTION_TEST] for _, record in reversed(tests.values()) if CORRECTION_TEST in record), None
     )
     if corrections:
         lines += correction_test_lines(corrections)
+    final = next((record for _, record in reversed(tests.values()) if SPLITS in record), None)
+    if final:
+        lines += split_lines(final[SPLITS], {agent: final[agent] for agent in (LAST, BEST) if agent in final})
     return lines
 
 
@@ -517,7 +523,7 @@ def correction_test_lines(records: dict[str, dict[str, Any]]) -> list[str]:
         cells = [_judged(*figure.read(r)) for figure in split]
         met = "" if r["quota_met"] else ", quota not met"
         lines.append(
-            f"| {agent} ({r['checkpoint'].split('/')[-1]}) | {r['episodes']}{met} | {_with_interval(r['corrected'])} | "
+            f"| {agent} ({r['checkpoint'].split('/')[-1]}) | {r['episodes']}{met} | {with_interval(r['corrected'])} | "
             + " | ".join(cells) + " |"
         )
     attention = {agent: r[ATTENTION] for agent, r in records.items() if r.get(ATTENTION)}
@@ -560,8 +566,8 @@ def _test_rows(index: int, name: str, record: dict[str, Any]) -> list[str]:
         }
         kinds = [_with_count(r["by_kind"].get(kind.value, {}).get("corrected")) for kind in Kind]
         rows.append(
-            f"| {index + 1}. {name} | {agent} ({r['checkpoint'].split('/')[-1]}) | {_with_interval(overall)} | "
-            f"{_with_interval(episodes)} | {_with_interval(r['corrected'])} | {' | '.join(kinds)} | "
+            f"| {index + 1}. {name} | {agent} ({r['checkpoint'].split('/')[-1]}) | {with_interval(overall)} | "
+            f"{with_interval(episodes)} | {with_interval(r['corrected'])} | {' | '.join(kinds)} | "
             f"{_with_count(r['by_negation']['with_negation'])} |"
         )
     return rows
@@ -569,14 +575,6 @@ def _test_rows(index: int, name: str, record: dict[str, Any]) -> list[str]:
 
 def _percent(value: float | None) -> str:
     return "-" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{100 * value:.0f}%"
-
-
-def _with_interval(rate: dict[str, Any]) -> str:
-    """A rate of a ``test.json`` record as ``92.0% [89.3, 94.1] (n)``, or ``-`` without episodes."""
-    if not rate["episodes"]:
-        return "-"
-    low, high = rate["ci"]
-    return f"{100 * rate['success']:.1f}% [{100 * low:.1f}, {100 * high:.1f}] ({rate['episodes']})"
 
 
 def _with_count(rate: dict[str, Any] | None) -> str:

@@ -7,12 +7,14 @@ evaluation episode is a training or test episode, whatever the run's seed or the
 Evaluation draws a new block for every evaluation (fresh episodes, yet the same ones when a resumed run
 repeats that evaluation); the test set is block 0 of its stage and never changes. The correction test
 (every episode a correction episode, as many as it takes to hear enough corrections) has a purpose of its
-own, so its episodes are none of the ordinary test's either.
+own, so its episodes are none of the ordinary test's either, and so has each generalisation split.
 """
 
 from __future__ import annotations
 
 from enum import IntEnum
+
+from lanrocli.choices import Split
 
 FIELD = 1 << 32
 """Width of each field of a seed; run seed, stage, block and episode index must each stay below it."""
@@ -22,6 +24,7 @@ class Purpose(IntEnum):
     EVALUATION = 1
     TEST = 2
     CORRECTION_TEST = 3
+    SPLIT_TEST = 4
 
 
 def first_seed(purpose: Purpose, run_seed: int, stage: int, block: int = 0) -> int:
@@ -45,3 +48,8 @@ def held_out_seed(run_seed: int, stage: int) -> int:
 def correction_test_seed(run_seed: int, stage: int) -> int:
     """First seed of a stage's held-out correction-test episodes."""
     return first_seed(Purpose.CORRECTION_TEST, run_seed, stage)
+
+
+def split_test_seed(run_seed: int, stage: int, split: Split) -> int:
+    """First seed of a generalisation split's held-out episodes: each split is a block of its own."""
+    return first_seed(Purpose.SPLIT_TEST, run_seed, stage, list(Split).index(split))

@@ -7,8 +7,9 @@ installed (``pip install -e '.[tensorboard]'``; without it a run writes none and
   (every 2,000 steps for ``eval.every: 10000``);
 - ``eval/``: each evaluation's figures, by their ``metrics.csv`` names (``eval/success``, ...);
 - ``test/``: each stage's test figures at the step the stage ended, per agent (``test/last/success``,
-  ``test/best/corrected_success``) and, for the last stage, the language check (``test/language/blank/success``)
-  and the correction test (``test/correction_test/last/corrected_success_negation``);
+  ``test/best/corrected_success``) and, for the last stage, the language check (``test/language/blank/success``),
+  the correction test (``test/correction_test/last/corrected_success_negation``) and the generalisation splits
+  of a curriculum's holdout (``test/splits/pairs/last/success``);
 - HParams: the resolved curriculum, by the key paths ``--set`` uses, with ``HPARAM_METRICS`` beside it, so
   that runs of a sweep compare setting against result.
 

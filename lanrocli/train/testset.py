@@ -20,13 +20,13 @@ from typing import Any
 
 import torch
 
-from lanrocli.choices import CorrectionForm, Instruction
+from lanrocli.choices import CorrectionForm, Instruction, Kind, Split
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.evaluation import EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.language.vocabulary import unknown_words
 from lanrocli.train.checkpoint import resolve_checkpoint
-from lanrocli.train.seeds import correction_test_seed, held_out_seed
+from lanrocli.train.seeds import correction_test_seed, held_out_seed, split_test_seed
 from lanrocli.train.trainer import AgentPolicy, TrainSettings, load_policy
 
 CORRECTION_TEST_NEGATION_RATE = 0.5
@@ -80,12 +80,14 @@ def checkpoint_name(directory: Path) -> str:
 
 @dataclass(frozen=True)
 class _Loaded:
-    """A checkpoint's deterministic policy and the environment settings it is to be measured on."""
+    """A checkpoint's deterministic policy and the environment settings it is to be measured on: its
+    run's holdout always applies, and ``split`` makes the episodes those of one generalisation split."""
 
     directory: Path
     settings: TrainSettings
     policy: AgentPolicy
     env: EnvSettings
+    split: Split | None = None
 
 
 def _load(
@@ -93,16 +95,19 @@ def _load(
     device: str | torch.device,
     changes: Callable[[EnvSettings], Mapping[str, Any]],
     check: Callable[[TrainSettings, EnvSettings], None] | None,
+    split: Split | None = None,
 ) -> _Loaded:
     """Load the checkpoint at ``path``; its stage's settings as evaluation sees them (neutral starts) are
-    changed by what ``changes`` makes of them, and ``check`` may refuse the result before anything runs."""
+    changed by what ``changes`` makes of them, and ``check`` may refuse the result before anything runs;
+    ``split``, which the checkpoint's holdout must define, makes the episodes that split's."""
     directory = resolve_checkpoint(path)
     settings, policy = load_policy(directory, device)
+    settings.holdout.check_split(split)
     stage = settings.env.for_evaluation()
     env_settings = stage.replace(**changes(stage))
     if check is not None:
         check(settings, env_settings)
-    return _Loaded(directory, settings, policy, env_settings)
+    return _Loaded(directory, settings, policy, env_settings, split)
 
 
 def _run(
@@ -121,6 +126,8 @@ def _run(
         object_slots=settings.slots,
         render_mode="rgb_array" if gif else None,
         vocabulary=loaded.policy.vocabulary,
+        holdout=settings.holdout,
+        split=loaded.split,
     )
     try:
         return evaluate(env, loaded.policy, episodes, first, gif, progress, instruction, enough)
@@ -202,4 +209,36 @@ def correction_test(
         "quota": {**asdict(quota), "negations": quota.negations if negations else 0},
         "quota_met": quota.met(report, negations),
     }
+    return Measurement(loaded.settings, loaded.env, first, True, report, record)
+
+
+def split_changes(split: Split) -> Callable[[EnvSettings], dict[str, Any]]:
+    """A split's changes to the last stage: the pairs split keeps the stage as it is (its goal alone
+    differs); the others make every episode a correction episode, of the common-ground kind for that split,
+    so that the thing held out is heard in every episode where the agent errs."""
+
+    def changes(stage: EnvSettings) -> dict[str, Any]:
+        if split is Split.PAIRS:
+            return {}
+        if split is Split.COMMON_GROUND:
+            return {"correction_rate": 1.0, "kinds": (Kind.COMMON_GROUND,)}
+        return {"correction_rate": 1.0}
+
+    return changes
+
+
+def split_test(
+    path: Path,
+    split: Split,
+    episodes: int,
+    device: str | torch.device = "cpu",
+    progress: Callable[[int], None] | None = None,
+    check: Callable[[TrainSettings, EnvSettings], None] | None = None,
+) -> Measurement:
+    """The checkpoint at ``path`` on ``episodes`` held-out episodes of one generalisation split of its run's
+    holdout, on a seed stream of the split's own."""
+    loaded = _load(path, device, split_changes(split), check, split)
+    first = split_test_seed(loaded.settings.seed, loaded.settings.stage, split)
+    report = _run(loaded, episodes, first, progress=progress)
+    record = {**_record(loaded, {"split": split.value, "first_seed": first}, Instruction.TRUE, report), "split": split.value}
     return Measurement(loaded.settings, loaded.env, first, True, report, record)

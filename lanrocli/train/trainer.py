@@ -30,6 +30,7 @@ from lanrocli.envs.evaluation import EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.tasks import make_task
 from lanrocli.language import Vocabulary, agent_vocabulary, grammar_vocabulary
+from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.train.checkpoint import Checkpoint, load_checkpoint, resolve_checkpoint, save_checkpoint
 from lanrocli.train.collect import Collector
 from lanrocli.train.runfolder import CheckpointError
@@ -64,6 +65,8 @@ class TrainSettings:
     sets the most objects of any of its stages, so one network serves all of them."""
     stage: int = 0
     """Index of the stage in its curriculum: the environments of each stage get their own seeds."""
+    holdout: Holdout = NOTHING_HELD_OUT
+    """What the curriculum keeps out of training, to test the final agent on (its generalisation splits)."""
 
     def __post_init__(self) -> None:
         if self.envs < 1:
@@ -90,11 +93,19 @@ class TrainSettings:
     def to_dict(self) -> dict[str, Any]:
         data = dataclasses.asdict(self)
         data["env"] = self.env.to_dict()
+        data["holdout"] = self.holdout.to_dict()
         return data
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> TrainSettings:
-        return cls(**{**data, "env": EnvSettings(**data["env"]), "buffer": BufferSettings(**data.get("buffer", {}))})
+        return cls(
+            **{
+                **data,
+                "env": EnvSettings(**data["env"]),
+                "buffer": BufferSettings(**data.get("buffer", {})),
+                "holdout": Holdout.from_dict(data.get("holdout")),
+            }
+        )
 
 
 def pick_device(requested: str | None) -> torch.device:
@@ -191,6 +202,7 @@ class Trainer:
             vocabulary=self.vocabulary,
             negations=settings.env.negations or settings.buffer.relabel_negations,
             seed=settings.seed,
+            holdout=settings.holdout,
         )
         self.rng = np.random.default_rng(np.random.SeedSequence(settings.seed).spawn(2)[1])
         self.progress = Progress()
@@ -205,7 +217,9 @@ class Trainer:
         partial, so that subprocesses receive the settings and not the trainer."""
         s = self.settings
         env = s.env.for_evaluation() if evaluation else s.env
-        return functools.partial(LanroEnv, s.task, env, object_slots=s.slots, vocabulary=self.vocabulary)
+        return functools.partial(
+            LanroEnv, s.task, env, object_slots=s.slots, vocabulary=self.vocabulary, holdout=s.holdout
+        )
 
     def enter_stage(self, env: EnvSettings, stage: int) -> None:
         """Collect and evaluate with new environment settings from now on.

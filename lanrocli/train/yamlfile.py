@@ -48,6 +48,15 @@ class Problem:
         return ": ".join(part for part in (where, self.path, self.message) if part)
 
 
+class KeyProblem(ValueError):
+    """A check of a whole section that finds the problem at one key inside it: raised from a validator of
+    the section, it is reported at that key's line."""
+
+    def __init__(self, key: KeyPath, message: str) -> None:
+        super().__init__(message)
+        self.key = key
+
+
 class CurriculumError(ValueError):
     """A curriculum that cannot be used; ``problems`` lists everything found, not just the first."""
 
@@ -284,6 +293,9 @@ def validate(model: type[Model], data: dict[str, Any], marks: Marks, file: Path 
 
 def _problem(root: type[BaseModel], details: ErrorDetails, marks: Marks, file: Path | str) -> Problem:
     loc = tuple(details["loc"])
+    error = details.get("ctx", {}).get("error")
+    if isinstance(error, KeyProblem):
+        loc += error.key
     # The deepest key of the path that the file has: a missing key is reported at its parent.
     where = next((marks[loc[:end]] for end in range(len(loc), 0, -1) if loc[:end] in marks), _Mark(file, None))
     return Problem(where.file, where.line, format_key(loc), _message(root, details))

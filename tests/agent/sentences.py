@@ -13,13 +13,13 @@ from lanrocli.choices import CorrectionForm
 from lanrocli.language import (
     BEGINNING_WORDS,
     COLOURS,
-    RARE_COLOUR_WORDS,
+    RARE_WORD_COLOURS,
     SHAPE_WORDS,
     TASK_VERBS,
     ObjectProps,
 )
 
-COLOUR_OF = {c: c for c in COLOURS} | {rare: c for c, rare in RARE_COLOUR_WORDS.items()}
+COLOUR_OF = {c: c for c in COLOURS} | RARE_WORD_COLOURS
 SHAPE_OF = {word: shape for shape, words in SHAPE_WORDS.items() for word in words}
 BEGINNING_OF = {words: kind for kind, all_words in BEGINNING_WORDS.items() for words in all_words}
 

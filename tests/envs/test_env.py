@@ -10,7 +10,7 @@ from gymnasium.utils.env_checker import check_env
 from lanrocli.envs.env import LanroEnv, observation_size
 from lanrocli.registration import ENV_IDS
 from lanrocli.envs.policies import make_policy
-from lanrocli.language import RARE_COLOUR_WORDS, SHAPE_WORDS, all_corrections, all_instructions, grammar_vocabulary
+from lanrocli.language import RARE_WORD_COLOURS, SHAPE_WORDS, all_corrections, all_instructions, grammar_vocabulary
 from lanrocli.sim import WORKSPACE
 
 INFO_KEYS = {
@@ -138,7 +138,7 @@ def test_common_ground_episodes_need_their_rare_colour_word(n_objects: int) -> N
     for seed in range(100):
         _, info = env.reset(seed=seed)
         rare, noun = info["instruction_text"].split()[-2:]
-        assert rare in RARE_COLOUR_WORDS.values()
+        assert rare in RARE_WORD_COLOURS
         shape = shape_of.get(noun)  # None for "object"
         without_colour = [k for k, o in enumerate(info["objects"]) if shape is None or o.shape == shape]
         assert info["goal_index"] in without_colour and len(without_colour) >= 2, info

@@ -10,7 +10,7 @@ from lanrocli.envs.instructor import Instructor, InstructorSettings
 from lanrocli.envs.scene import Scene, sample_objects
 from lanrocli.language import (
     BEGINNING_WORDS,
-    RARE_COLOUR_WORDS,
+    RARE_WORD_COLOURS,
     TASK_VERBS,
     ObjectProps,
     all_corrections,
@@ -20,7 +20,7 @@ from lanrocli.language import (
 
 INSTRUCTIONS = {t for task in TASK_VERBS for t, _ in all_instructions(task, rare=True)}
 CORRECTIONS = {t for t, _ in all_corrections(negations=True)}
-COLOUR_OF_WORD = {w: c for c, w in RARE_COLOUR_WORDS.items()}
+COLOUR_OF_WORD = dict(RARE_WORD_COLOURS)
 
 
 def parse_object(words: list[str]) -> tuple[str | None, str | None]:
@@ -142,7 +142,8 @@ def test_common_ground_speaks_only_rare_phrases_whose_colour_word_is_needed() ->
     for seed in range(20):
         instructor = Instructor("reach", settings)
         instructor.start(np.random.default_rng(seed), scene, Kind.COMMON_GROUND)
-        assert instructor.text.split()[-2:] == ["azure", "object"]
+        rare, noun = instructor.text.split()[-2:]
+        assert RARE_WORD_COLOURS[rare] == "blue" and noun == "object"
     # The other object is blue too, so "the azure object" would not identify the goal, and "the azure
     # brick" is understood from "brick" alone: no rare phrase is both, and none is spoken.
     scene = Scene((ObjectProps("blue", "cuboid"), ObjectProps("blue", "cube")), 0, np.zeros((2, 2)))

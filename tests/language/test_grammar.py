@@ -13,7 +13,7 @@ from lanrocli.choices import CorrectionForm
 from lanrocli.language import (
     BEGINNING_WORDS,
     COLOURS,
-    RARE_COLOUR_WORDS,
+    RARE_WORD_COLOURS,
     SHAPE_WORDS,
     TASK_VERBS,
     TASKS,
@@ -31,7 +31,7 @@ SHAPE_WORD_LIST = [w for words in SHAPE_WORDS.values() for w in words]
 
 def bnf_objects(rare: bool) -> set[str]:
     """OBJECT ::= COLOR SHAPE | SHAPE object | COLOR object, written out independently of the package."""
-    colours = list(COLOURS) + (list(RARE_COLOUR_WORDS.values()) if rare else [])
+    colours = list(COLOURS) + (list(RARE_WORD_COLOURS) if rare else [])
     return (
         {f"{c} {s}" for c, s in itertools.product(colours, SHAPE_WORD_LIST)}
         | {f"{s} object" for s in SHAPE_WORD_LIST}
@@ -61,7 +61,7 @@ def test_extended_instructions_are_instruction_then_correction() -> None:
     sentences = list(all_sentences("push", corrections=True, negations=True, rare=True))
     instructions = {t for t, _ in all_instructions("push", rare=True)}
     corrections = {t for t, _ in all_corrections(negations=True)}
-    assert len(sentences) == len(instructions) * len(corrections) == 567 * 594
+    assert len(sentences) == len(instructions) * len(corrections) == 837 * 594  # 3 verbs x (27 colour words x 9 shape words + 9 + 27)
     sample = sentences[:: len(sentences) // 997]
     for s in sample:
         assert s.instruction in instructions and s.correction in corrections
@@ -75,7 +75,7 @@ def test_sentences_are_lower_case_single_spaced_without_punctuation() -> None:
 
 
 def test_corrections_never_use_rare_words() -> None:
-    rare = set(RARE_COLOUR_WORDS.values())
+    rare = set(RARE_WORD_COLOURS)
     for text, _ in all_corrections(negations=True):
         assert not rare & set(text.split())
 

@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from lanrocli.agent.settings import BufferSettings, SACSettings
-from lanrocli.choices import Kind, Mode, Task
+from lanrocli.choices import Kind, Mode, Split, Task
 from lanrocli.envs.settings import EnvSettings
-from lanrocli.language import TASKS
+from lanrocli.language import COLOURS, TASKS, ObjectProps
 from lanrocli.train.curriculum import (
     QUICK_TEST_EPISODES,
     Curriculum,
@@ -486,3 +486,65 @@ def test_lanro_check_does_not_load_torch() -> None:
     assert "environment steps in all" in result.stdout
     imported = {line.rsplit("|", 1)[-1].strip() for line in result.stderr.splitlines() if line.startswith("import time:")}
     assert "lanrocli.train.curriculum" in imported and not imported & {"torch", "pybullet"}
+
+
+HELD_OUT = """\
+name: demo
+task: push
+stages:
+  - name: first
+    env: {objects: 3, mode: colour_shape, correction_rate: 0.5, negations: true, rare_words: true, max_delay: 10}
+    budget: {steps: 1000}
+holdout:
+  pairs: [red cylinder, yellow cuboid]
+  correction_words: [block, brick, barrel]
+  late_corrections: [11, 20]
+  common_ground: [crimson, jade]
+"""
+
+
+def test_a_holdout_section_is_read_into_the_splits(tmp_path: Path) -> None:
+    holdout = load_curriculum(write(tmp_path, "c.yaml", HELD_OUT)).holdout.settings()
+    assert holdout.splits == tuple(Split)
+    assert holdout.pairs == (ObjectProps("red", "cylinder"), ObjectProps("yellow", "cuboid"))
+    assert holdout.late_corrections == (11, 20)
+
+
+@pytest.mark.parametrize(
+    ("line", "bad", "key", "message"),
+    [
+        (8, "  pairs: [red cylinder, mauve cube]", "holdout.pairs", "unknown colour 'mauve'"),
+        (8, "  pairs: [red cylinder, red sphere]", "holdout.pairs", "unknown shape 'sphere'"),
+        (9, "  correction_words: [block, brick, cylinderish]", "holdout.correction_words", "'cylinderish' is none"),
+        (9, "  correction_words: [block, brick]", "holdout.correction_words", "0 for cylinder"),
+        (10, "  late_corrections: [10, 20]", "holdout.late_corrections", "start it at 11"),
+        (11, "  common_ground: [crimson, scarlet]", "holdout.common_ground", "every rare word for red"),
+        (11, "  common_ground: [mauveish]", "holdout.common_ground", "'mauveish' is none"),
+    ],
+)
+def test_a_bad_holdout_is_located_at_its_key(tmp_path: Path, line: int, bad: str, key: str, message: str) -> None:
+    lines = HELD_OUT.splitlines()
+    lines[line - 1] = bad
+    problem = only_problem(write(tmp_path, "c.yaml", "\n".join(lines) + "\n"))
+    assert (problem.file, problem.line, problem.path) == (tmp_path / "c.yaml", line, key)
+    assert message in problem.message
+
+
+def test_a_holdout_that_leaves_no_valid_goal_is_refused(tmp_path: Path) -> None:
+    every_cube = ", ".join(f"{colour} cube" for colour in COLOURS)
+    text = MINIMAL.replace("task: push", "task: push\nholdout:\n  pairs: [" + every_cube + "]")
+    problem = only_problem(write(tmp_path, "c.yaml", text))
+    assert (problem.line, problem.path) == (4, "holdout.pairs")
+    assert "have no goal" in problem.message and "stages[0]" in problem.message
+
+
+def test_a_pairs_split_needs_a_last_stage_that_can_show_the_pair(tmp_path: Path) -> None:
+    text = MINIMAL.replace("task: push", "task: push\nholdout:\n  pairs: [red cylinder]")  # colour mode: cubes only
+    problem = only_problem(write(tmp_path, "c.yaml", text))
+    assert problem.path == "holdout.pairs" and "last stage" in problem.message
+
+
+def test_a_common_ground_split_needs_rare_words_in_the_last_stage(tmp_path: Path) -> None:
+    text = HELD_OUT.replace("rare_words: true, ", "")
+    problem = only_problem(write(tmp_path, "c.yaml", text))
+    assert (problem.line, problem.path) == (11, "holdout.common_ground") and "rare_words" in problem.message

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from lanrocli.choices import CorrectionForm
+from lanrocli.choices import CorrectionForm, Split
 from lanrocli.envs.evaluation import EvaluationReport
 from lanrocli.envs.figures import EpisodeResult, wilson_interval
 from lanrocli.envs.settings import EnvSettings
@@ -23,13 +23,14 @@ from lanrocli.train.runfolder import (
     METRIC_COLUMNS,
     METRICS,
     REPORT,
+    SPLITS,
     TEST,
     read_pointer,
     step_checkpoint,
     write_pointer,
 )
-from lanrocli.train.seeds import correction_test_seed, evaluation_seed, held_out_seed
-from lanrocli.train.testset import CORRECTION_QUOTA, Measurement, correction_test
+from lanrocli.train.seeds import correction_test_seed, evaluation_seed, held_out_seed, split_test_seed
+from lanrocli.train.testset import CORRECTION_QUOTA, Measurement, correction_test, split_test
 from lanrocli.train.trainer import TrainSettings
 
 from .runs import Baseline, outcome, rows, scalars, tiny, train, wait_for_rows
@@ -160,6 +161,16 @@ def test_the_run_folder_has_every_file(straight: Baseline) -> None:
         assert f"| {index}. {name} | last ({read_pointer(out / f'stage-{index}-{name}' / 'last').name})" in table
     assert set(tested["language"]) == {"true", "blank", "other"}
     assert set(tested[CORRECTION_TEST]) == {"last", "best"} and "## Correction test" in table
+    # ... and on each generalisation split of the holdout, on held-out episodes of the split's own.
+    assert list(tested[SPLITS]) == ["pairs", "correction_words", "late_corrections"]
+    for split, records in tested[SPLITS].items():
+        assert set(records) == {"last", "best"}
+        for record in records.values():
+            assert record["split"] == split and record["episodes"] == 2
+            assert record["episodes_from"] == {"split": split, "first_seed": split_test_seed(5, 2, Split(split))}
+        assert f"| {split} | last |" in table
+    assert "## Generalisation splits" in table
+    assert split_test(read_pointer(out / "stage-3-third" / "last"), Split.PAIRS, 2).record == tested[SPLITS]["pairs"]["last"]
 
 
 def test_the_last_stage_ends_with_a_correction_test_of_both_agents(tmp_path: Path) -> None:
