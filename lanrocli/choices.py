@@ -1,4 +1,5 @@
-"""The named choices every layer shares: tasks, scene modes, kinds and forms of correction, the sentence shown.
+"""The named choices every layer shares: tasks, scene modes, kinds and forms of correction, the sentence shown,
+the devices lanro runs on.
 
 One enum each, read alike by the environment, the curriculum schema (pydantic), the command line (typer)
 and the reports, so a new value is added here once. Each is a ``StrEnum``: its members are their values as
@@ -7,6 +8,7 @@ strings (equal, hashed, printed and written to JSON as them), which is what file
 
 from __future__ import annotations
 
+import re
 import warnings
 from enum import StrEnum
 
@@ -94,3 +96,14 @@ class Instruction(StrEnum):
     TRUE = "true"
     BLANK = "blank"
     OTHER = "other"
+
+
+DEVICES = re.compile(r"cpu|cuda(:\d+)?")
+"""The devices lanro runs on, by the names torch gives them: ``cpu``, ``cuda`` and ``cuda:N``."""
+
+
+def check_device(name: str) -> None:
+    """Refuse a device name lanro does not run on, with the choices. It needs no torch, so every command
+    refuses a bad ``--device`` before anything loads, whether or not it would use the device."""
+    if DEVICES.fullmatch(name) is None:
+        raise ValueError(f"--device {name!r} is not a device lanro runs on; use cpu, cuda or cuda:N")

@@ -22,9 +22,10 @@ from rich.markup import escape
 from rich.table import Table
 
 from lanrocli import __version__
-from lanrocli.choices import Instruction, Split, Task
-from lanrocli.envs.settings import EnvSettings
+from lanrocli.choices import Instruction, Split, Task, check_device
+from lanrocli.envs.settings import CORRECTION_LIMIT, EnvSettings
 from lanrocli.language import all_sentences, grammar_vocabulary, sample_sentence, sentence_stats
+from lanrocli.options import Command, Group
 
 if TYPE_CHECKING:
     from lanrocli.envs.evaluation import EvaluationReport
@@ -36,7 +37,7 @@ app = typer.Typer(
     name="lanro",
     help="Train and evaluate a simulated Panda arm that follows language instructions and recovers from corrections.",
     no_args_is_help=True,
-    add_completion=False,
+    cls=Group,
     pretty_exceptions_enable=False,
 )
 
@@ -66,7 +67,17 @@ def main(
     """Train and evaluate a simulated Panda arm that follows language instructions and recovers from corrections."""
 
 
-@app.command("sample-instructions")
+def _device(value: str | None) -> str | None:
+    """Every command's ``--device``, checked by name before anything loads, as ``pick_device`` checks it."""
+    if value is not None:
+        try:
+            check_device(value)
+        except ValueError as error:
+            raise fail(str(error)) from None
+    return value
+
+
+@app.command("sample-instructions", cls=Command)
 def sample_instructions(
     task: Annotated[Task, typer.Option(help="Task whose verbs the instructor uses.")] = Task.REACH,
     n: Annotated[int, typer.Option("--n", min=1, help="How many sentences to sample.")] = 10,
@@ -221,26 +232,31 @@ def _is_list(hint: Any) -> bool:
     return typing.get_origin(_without_none(hint)) is tuple
 
 
-def _with_env_options(command: Callable[..., None]) -> Callable[..., None]:
-    """Give ``command`` one option per ``EnvSettings`` field, from the field's type and ``help``: typer reads
-    the signature, and the command receives them in its ``**env_options``, None where not given."""
-    signature = inspect.signature(command, eval_str=True)
-    hints = typing.get_type_hints(EnvSettings)
-    options = [
-        inspect.Parameter(
-            f.name,
-            inspect.Parameter.KEYWORD_ONLY,
-            default=None,
-            annotation=Annotated[
-                (str if _is_list(hints[f.name]) else _without_none(hints[f.name])) | None,
-                typer.Option(help=f.metadata["help"]),
-            ],
-        )
-        for f in dataclasses.fields(EnvSettings)
-    ]
-    kept = [p for p in signature.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
-    command.__signature__ = signature.replace(parameters=kept + options)  # type: ignore[attr-defined]
-    return command
+def _with_env_options(**helps: str) -> Callable[[Callable[..., None]], Callable[..., None]]:
+    """Give a command one option per ``EnvSettings`` field, from the field's type and ``help`` (or the one
+    ``helps`` gives it, where the command reads the setting its own way): typer reads the signature, and the
+    command receives them in its ``**env_options``, None where not given."""
+
+    def add_options(command: Callable[..., None]) -> Callable[..., None]:
+        signature = inspect.signature(command, eval_str=True)
+        hints = typing.get_type_hints(EnvSettings)
+        options = [
+            inspect.Parameter(
+                f.name,
+                inspect.Parameter.KEYWORD_ONLY,
+                default=None,
+                annotation=Annotated[
+                    (str if _is_list(hints[f.name]) else _without_none(hints[f.name])) | None,
+                    typer.Option(help=helps.get(f.name, f.metadata["help"])),
+                ],
+            )
+            for f in dataclasses.fields(EnvSettings)
+        ]
+        kept = [p for p in signature.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
+        command.__signature__ = signature.replace(parameters=kept + options)  # type: ignore[attr-defined]
+        return command
+
+    return add_options
 
 
 def _env_changes(options: dict[str, Any]) -> dict[str, Any]:
@@ -261,8 +277,8 @@ def _env_changes(options: dict[str, Any]) -> dict[str, Any]:
     return changes
 
 
-@app.command("eval")
-@_with_env_options
+@app.command("eval", cls=Command)
+@_with_env_options()
 def evaluate_command(
     what: Annotated[
         str,
@@ -292,7 +308,10 @@ def evaluate_command(
             "object on the table (other; success is the task on that object).",
         ),
     ] = Instruction.TRUE,
-    device: Annotated[str | None, typer.Option(help="cpu or cuda for a trained agent (default: cuda if available).")] = None,
+    device: Annotated[
+        str | None,
+        typer.Option(callback=_device, help="cpu, cuda or cuda:N for a trained agent (default: cuda if available)."),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
     gif: Annotated[Path | None, typer.Option(help="Write the first episodes as an animated GIF here.")] = None,
     correction_test: Annotated[
@@ -314,9 +333,11 @@ def evaluate_command(
     ] = None,
     **env_options: Any,
 ) -> None:
-    """Evaluate a scripted policy or a trained agent: success overall, on correction episodes, where a correction
-    was spoken, per kind and form of correction, with 95% intervals. For a checkpoint, the environment defaults
-    to the stage it was trained on and the episodes to that stage's held-out test episodes; options change them."""
+    """Evaluate a scripted policy or a trained agent, overall and per kind and form of correction.
+
+    Success on all episodes, on correction episodes, where a correction was spoken, per kind and form of
+    correction, with 95% intervals. For a checkpoint, the environment defaults to the stage it was trained on
+    and the episodes to that stage's held-out test episodes; options change them."""
     from lanrocli.envs.env import LanroEnv
     from lanrocli.envs.evaluation import evaluate
     from lanrocli.envs.policies import make_policy
@@ -463,11 +484,22 @@ def _test_episodes(path: Path) -> int:
         return HeldOutConfig().episodes
 
 
-@app.command("check")
+CURRICULUM_HELP = "A YAML file, or the name of a curriculum that ships with lanro, such as push"
+
+
+SETTINGS = "KEY=VALUE ..."
+"""The metavar of ``--set``: several settings may follow it."""
+
+
+@app.command("check", cls=Command)
 def check_command(
     curriculum: Annotated[
-        Path | None,
-        typer.Argument(help="Curriculum YAML file to validate. Optional with --quick (the built-in one)."),
+        str | None,
+        typer.Argument(
+            metavar="CURRICULUM",
+            help=f"Curriculum to validate: {CURRICULUM_HELP}. Without one, the packaged curricula are listed; with "
+            "--quick, the built-in one is checked.",
+        ),
     ] = None,
     quick: Annotated[
         bool,
@@ -476,31 +508,61 @@ def check_command(
             help="Show the plan 'lanro train --quick' runs: the built-in curriculum as written, or FILE scaled down.",
         ),
     ] = False,
+    changes: Annotated[
+        list[str] | None,
+        typer.Option("--set", metavar=SETTINGS, help="KEY=VALUE changed in the plan shown, as 'lanro train --set' does."),
+    ] = None,
 ) -> None:
     """Validate a curriculum and print the resolved plan (stages, budgets, total steps) without training."""
     if curriculum is None and not quick:
-        raise fail("give a curriculum file (e.g. curricula/reach.yaml), or --quick for the built-in one")
-    plan = _load_plan(curriculum, quick, None, None)
+        if changes:
+            raise fail("--set needs the curriculum it applies to")
+        _print_packaged()
+        return
+    plan = _load_plan(curriculum, quick, None, None, changes or [])
     _print_plan(plan)
 
 
-def _load_plan(path: Path | None, quick: bool, seed: int | None, envs: int | None) -> Curriculum:
-    """The curriculum to run, with the command line's overrides: the file at ``path``, scaled down by
-    ``quick`` (to try a file out); without a file, with ``quick``, the built-in curriculum exactly as
-    written (``curricula/quick.yaml``, whose budgets are small already)."""
-    from lanrocli.train.curriculum import CurriculumError, builtin_curriculum, load_curriculum
+def _print_packaged() -> None:
+    from lanrocli.train.curriculum import load_curriculum, packaged_curricula
+
+    table = Table(title="the curricula that ship with lanro")
+    for column in ("name", "task", "stages", "steps at most"):
+        table.add_column(column)
+    for name, path in packaged_curricula().items():
+        plan = load_curriculum(path)
+        table.add_row(name, plan.task, ", ".join(stage.name for stage in plan.stages), f"{plan.total_steps:,}")
+    console = Console()
+    console.print(table)
+    console.print("'lanro check NAME' shows one's plan, 'lanro train NAME' runs it", highlight=False)
+
+
+def _load_plan(
+    path: str | None, quick: bool, seed: int | None, envs: int | None, changes: list[str] | None = None
+) -> Curriculum:
+    """The curriculum to run, with the command line's overrides: the file or packaged curriculum ``path``
+    names, scaled down by ``quick`` (to try a file out); without one, with ``quick``, the built-in
+    curriculum exactly as written (``curricula/quick.yaml``, whose budgets are small already). Then the
+    ``--set`` settings ``changes``, so that they win over the scaling."""
+    from lanrocli.train.curriculum import CurriculumError, builtin_curriculum, find_curriculum, load_curriculum
+    from lanrocli.train.overrides import SettingError, read_settings
 
     try:
+        settings = read_settings("--set", changes or [])
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", FutureWarning)
-            plan = load_curriculum(path) if path is not None else builtin_curriculum()
+            plan = load_curriculum(find_curriculum(path)) if path is not None else builtin_curriculum()
         for warning in caught:
             err_console.print(f"[bold yellow]warning:[/] {escape(f'{path}: {warning.message}')}")
+        if quick and path is not None:
+            plan = plan.quick()
+        if settings:
+            plan = plan.with_settings(settings, path or "curricula/quick.yaml")
+    except SettingError as error:
+        raise fail(str(error)) from None
     except CurriculumError as error:
         count = len(error.problems)
         raise fail(f"{count} problem{'s' if count > 1 else ''} in the curriculum:\n{error}") from None
-    if quick and path is not None:
-        plan = plan.quick()
     return plan.with_overrides(seed=seed, envs=envs)
 
 
@@ -540,18 +602,22 @@ def _print_plan(plan: Curriculum) -> None:
     console.print(f"{plan.updates_per_step:g} update(s) per environment step, from step {plan.learning_starts:,}")
 
 
-@app.command("train")
+@app.command("train", cls=Command)
 def train_command(
     curriculum: Annotated[
-        Path | None,
+        str | None,
         typer.Argument(
-            help="Curriculum YAML file. Optional with --quick (the built-in curricula/quick.yaml) and with --resume."
+            metavar="CURRICULUM",
+            help=f"{CURRICULUM_HELP} ('lanro check' lists them). Optional with --quick (the built-in "
+            "curricula/quick.yaml) and with --resume.",
         ),
     ] = None,
     out: Annotated[Path | None, typer.Option(help="Run folder (default: checkpoints/<curriculum name>).")] = None,
     seed: Annotated[int | None, typer.Option(min=0, help="Override the curriculum's seed.")] = None,
     envs: Annotated[int | None, typer.Option(min=1, max=64, help="Override the number of parallel environments.")] = None,
-    device: Annotated[str | None, typer.Option(help="cpu or cuda (default: cuda if available).")] = None,
+    device: Annotated[
+        str | None, typer.Option(callback=_device, help="cpu, cuda or cuda:N (default: cuda if available).")
+    ] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the run in --out where it stopped.")] = False,
     quick: Annotated[
         bool,
@@ -561,11 +627,23 @@ def train_command(
             "learns. With a file: that file with every budget and evaluation scaled down, to try it out.",
         ),
     ] = False,
+    changes: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--set",
+            metavar=SETTINGS,
+            help="KEY=VALUE changed in the curriculum, by its key paths as its error messages name them, the value "
+            "read as YAML: agent.critics=2 'stages[0].budget.steps=5000'.",
+        ),
+    ] = None,
 ) -> None:
     """Train an agent through a curriculum of stages, with evaluation, checkpoints and resume."""
     if curriculum is None and not quick and not resume:
-        raise fail("give a curriculum file (e.g. curricula/reach.yaml), or --quick for the built-in one")
-    plan = None if curriculum is None and resume and not quick else _load_plan(curriculum, quick, seed, envs)
+        raise fail("give a curriculum (a YAML file, or a packaged one by name: 'lanro check' lists them), or --quick "
+                   "for the built-in one")
+    if curriculum is None and not quick and changes:
+        raise fail("--set needs the curriculum it applies to; a resumed run keeps the settings it started with")
+    plan = None if curriculum is None and resume and not quick else _load_plan(curriculum, quick, seed, envs, changes)
 
     # Only now: a bad curriculum is refused without waiting for torch and pybullet to load.
     import torch
@@ -603,7 +681,14 @@ def train_command(
             run.close()
         Console().print(f"the run in {out} has finished already; see {out / 'report.md'}")
         return
-    resume_hint = "lanro train " + (f"{curriculum} " if curriculum else "") + ("--quick " if quick else "") + f"--out {out} --resume"
+    again = [
+        *([curriculum] if curriculum else []),
+        *(["--quick"] if quick else []),
+        *(["--seed", str(seed)] if seed is not None else []),
+        *(["--envs", str(envs)] if envs is not None else []),
+        *(arg for change in changes or [] for arg in ("--set", change)),
+    ]
+    resume_hint = shlex.join(["lanro", "train", *again]) + f" --out {out} --resume"
     with StopRequest() as stop:
         try:
             with display:
@@ -637,7 +722,7 @@ def train_command(
     console.print(f"run folder: {out}\nnext, try:", *lines, sep="\n", markup=False, highlight=False)
 
 
-@app.command("plot")
+@app.command("plot", cls=Command)
 def plot_command(
     runs: Annotated[
         list[Path],
@@ -661,37 +746,14 @@ def plot_command(
     Console().print(f"wrote {path}")
 
 
-class _ManyValues(typer.core.TyperCommand):
-    """Lets ``--seeds 0 1 2`` and ``--set a=1 b=2`` give several values after one option, as well as the usual
-    ``--seeds 0 --seeds 1``: each further value is read as if the option stood before it again."""
-
-    MANY: dict[str, Callable[[str], bool]] = {
-        "--seeds": lambda text: text.replace(",", "").isdigit(),
-        "--set": lambda text: "=" in text,
-        "--grid": lambda text: "=" in text,
-    }
-
-    def parse_args(self, ctx: typer.Context, args: list[str]) -> list[str]:
-        spread: list[str] = []
-        option, own_value = None, False
-        for arg in args:
-            if own_value:
-                spread.append(arg)
-                own_value = False
-            elif option is not None and not arg.startswith("-") and self.MANY[option](arg):
-                spread += [option, arg]
-            else:
-                option = arg if arg in self.MANY else None
-                own_value = option is not None
-                spread.append(arg)
-        return super().parse_args(ctx, spread)
-
-
-@app.command("sweep", cls=_ManyValues)
+@app.command("sweep", cls=Command)
 def sweep_command(
     curriculum: Annotated[
-        Path | None,
-        typer.Argument(help="Curriculum YAML file. Optional with --quick (the built-in one) and with --resume."),
+        str | None,
+        typer.Argument(
+            metavar="CURRICULUM",
+            help=f"{CURRICULUM_HELP}. Optional with --quick (the built-in one) and with --resume.",
+        ),
     ] = None,
     out: Annotated[
         Path | None, typer.Option(help="Sweep folder: sweep.yaml and one run folder per trial (default: sweeps/<name>).")
@@ -701,7 +763,7 @@ def sweep_command(
     ] = None,
     changes: Annotated[
         list[str] | None,
-        typer.Option("--set", metavar="KEY=VALUE ...", help="KEY=VALUE changed for every trial, by the curriculum's key paths: agent.critics=2."),
+        typer.Option("--set", metavar=SETTINGS, help="KEY=VALUE changed for every trial, by the curriculum's key paths: agent.critics=2."),
     ] = None,
     grid: Annotated[
         list[str] | None,
@@ -741,6 +803,7 @@ def sweep_command(
     """Run a curriculum over seeds, settings and grids of settings on Ray: one ordinary run folder per trial."""
     from lanrocli.sweep import plan as sweeps
     from lanrocli.train.curriculum import CurriculumError
+    from lanrocli.train.overrides import SettingError
 
     spec = None
     if curriculum is not None or quick:
@@ -749,10 +812,11 @@ def sweep_command(
             spec = sweeps.SweepSpec.from_options(
                 base, str(curriculum or "curricula/quick.yaml"), quick, seeds or [], changes or [], grid or []
             )
-        except sweeps.SweepError as error:
+        except (sweeps.SweepError, SettingError) as error:
             raise fail(str(error)) from None
     elif not resume:
-        raise fail("give a curriculum file (e.g. curricula/push.yaml), --quick for the built-in one, or --resume")
+        raise fail("give a curriculum (a YAML file, or a packaged one by name: 'lanro check' lists them), --quick for "
+                   "the built-in one, or --resume")
     elif seeds or changes or grid:
         raise fail("--seeds, --set and --grid need the curriculum file they apply to")
     if out is None:
@@ -807,7 +871,7 @@ def sweep_command(
     console.print(f"next: lanro report {shlex.quote(str(out))}   lanro plot {shlex.quote(str(out))} --out curves.png", markup=False, highlight=False)
 
 
-@app.command("report")
+@app.command("report", cls=Command)
 def report_command(
     runs: Annotated[list[Path], typer.Argument(help="Run folders or sweep folders.")],
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
@@ -845,8 +909,11 @@ def report_command(
         typer.echo(text, nl=False)
 
 
-@app.command("play")
-@_with_env_options
+@app.command("play", cls=Command)
+@_with_env_options(
+    max_episode_steps=f"Steps per episode (default: {CORRECTION_LIMIT}, as for a correction episode: any episode "
+    "may be corrected)."
+)
 def play_command(
     checkpoint: Annotated[
         Path,
@@ -865,7 +932,9 @@ def play_command(
     steps_per_line: Annotated[
         int, typer.Option(min=1, help="Steps the agent acts before each further line is read.")
     ] = 10,
-    device: Annotated[str | None, typer.Option(help="cpu or cuda (default: cuda if available).")] = None,
+    device: Annotated[
+        str | None, typer.Option(callback=_device, help="cpu, cuda or cuda:N (default: cuda if available).")
+    ] = None,
     gif: Annotated[
         Path | None, typer.Option(help="Folder for one GIF per episode (episode-1.gif, ...), captioned with the sentence.")
     ] = None,
@@ -877,7 +946,7 @@ def play_command(
     Each episode draws a scene from the checkpoint's stage (options change it) and shows its objects; the next line
     is the instruction. The agent then acts --steps-per-line steps before each further line: text is a correction,
     appended to the instruction as the instructor does (a later one replaces it), and an empty line lets it go on.
-    An episode lasts 100 steps (--max-episode-steps) and ends sooner when the task holds for the object the sentence
+    An episode lasts --max-episode-steps steps and ends sooner when the task holds for the object the sentence
     singles out; the next line is the next episode's instruction. Unknown words are named and read as <unk>;
     a sentence outside the grammar is flagged and read all the same.
 

@@ -4,6 +4,11 @@ Registration names the environment class by an import string, so it loads neithe
 environment module: they load when an environment is made. ``import lanrocli`` therefore stays cheap
 enough for every command of the CLI, and ``gymnasium.make("lanro/Push-v0")`` works after it.
 
+``gymnasium.make`` keeps its ``max_episode_steps`` keyword to itself: it wraps the environment in a
+``TimeLimit`` with that limit, or with the spec's when none is given, and never passes it on. So the specs
+carry the default settings' limit, and the environments they make leave counting steps to that wrapper
+(``time_limit=False``): the limit asked of ``make`` is the one an episode is truncated at.
+
 Gymnasium 1.0 dropped the discovery of environments through package entry points, so an interpreter
 that has not imported lanrocli finds the ids by naming the package in the id, which gymnasium imports
 first: ``gymnasium.make("lanrocli:lanro/Push-v0")``.
@@ -12,6 +17,8 @@ first: ``gymnasium.make("lanrocli:lanro/Push-v0")``.
 from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry
+
+from lanrocli.envs.settings import EnvSettings
 
 ENV_IDS: dict[str, str] = {
     "reach": "lanro/Reach-v0",
@@ -32,4 +39,9 @@ def register_envs() -> None:
     """
     for task, env_id in ENV_IDS.items():
         if env_id not in registry:
-            register(id=env_id, entry_point=ENTRY_POINT, kwargs={"task": task})
+            register(
+                id=env_id,
+                entry_point=ENTRY_POINT,
+                max_episode_steps=EnvSettings().episode_limit,
+                kwargs={"task": task, "time_limit": False},
+            )

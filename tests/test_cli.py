@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import inspect
 import json
+import os
+import re
 from pathlib import Path
 
 import pytest
 import torch
+import typer
 from typer.testing import CliRunner
 
 from lanrocli import __version__
@@ -28,6 +32,68 @@ def test_help_lists_commands() -> None:
 def test_version() -> None:
     result = runner.invoke(app, ["--version"])
     assert result.exit_code == 0 and __version__ in result.output
+
+
+COMMANDS = sorted(typer.main.get_command(app).commands)  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize("command", [[], *([name] for name in COMMANDS)], ids=lambda c: " ".join(c) or "lanro")
+def test_help_labels_the_options_that_take_a_value_and_no_flag(command: list[str]) -> None:
+    result = runner.invoke(app, [*command, "--help"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    assert "--help" in result.output and "<bool>" not in result.output
+    if command == ["eval"]:
+        assert "<int range>" in result.output and "<path>" in result.output
+
+
+def test_every_command_is_summed_up_in_one_unbroken_line() -> None:
+    """``lanro --help`` shows the first paragraph of each command's help with its line breaks kept."""
+    for name, command in typer.main.get_command(app).commands.items():  # type: ignore[attr-defined]
+        summary = inspect.cleandoc(command.help or "").split("\n\n")[0]
+        assert summary and "\n" not in summary, f"lanro {name}: {summary!r}"
+
+
+def test_eval_help_names_every_kind_of_correction_whole() -> None:
+    from lanrocli.choices import Kind
+
+    result = runner.invoke(app, ["eval", "--help"], env={"COLUMNS": "100"})
+    assert all(re.search(rf"\b{kind}\b", result.output) for kind in Kind), result.output
+
+
+@pytest.mark.parametrize(
+    "command", [["eval", "oracle"], ["train", "--quick", "--out", "never"], ["play", "no-such-run"]], ids=lambda c: c[0]
+)
+def test_every_command_refuses_an_unknown_device_by_name(command: list[str], tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    result = runner.invoke(app, [*command, "--device", "gpu0"])
+    assert result.exit_code == 2, result.output
+    assert "--device 'gpu0' is not a device lanro runs on; use cpu, cuda or cuda:N" in result.output
+    assert not (tmp_path / "never").exists()
+
+
+def test_play_states_one_episode_limit() -> None:
+    from lanrocli.envs.settings import CORRECTION_LIMIT, PLAIN_LIMIT
+
+    play = typer.main.get_command(app).commands["play"]  # type: ignore[attr-defined]
+    (limit,) = [param.help for param in play.params if param.name == "max_episode_steps"]
+    assert f"default: {CORRECTION_LIMIT}" in limit and str(PLAIN_LIMIT) not in limit
+    assert str(CORRECTION_LIMIT) not in (play.help or ""), "the limit is stated by the option alone"
+
+
+def test_shell_completion_completes_commands_and_options() -> None:
+    import subprocess
+    import sys
+
+    def complete(words: str) -> list[str]:
+        cword = str(len(words.split()) - 1)
+        env = {**os.environ, "_LANRO_COMPLETE": "complete_bash", "COMP_WORDS": words, "COMP_CWORD": cword}
+        code = "from lanrocli.cli import app; app(prog_name='lanro')"
+        result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+        return result.stdout.split()
+
+    assert complete("lanro tr") == ["train"]
+    assert "--correction-rate" in complete("lanro eval --corr")
+    assert "--install-completion" in runner.invoke(app, ["--help"]).output
 
 
 def test_sample_json_is_reproducible_and_well_formed() -> None:
@@ -206,8 +272,39 @@ def test_quick_without_a_file_runs_quick_yaml_as_written_and_with_a_file_scales_
     assert builtin.output == runner.invoke(app, ["check", str(QUICK)]).output
     scaled = runner.invoke(app, ["check", str(QUICK), "--quick"])
     assert scaled.exit_code == 0 and f"{written.name}-quick:" in scaled.output
-    missing = runner.invoke(app, ["check"])
-    assert missing.exit_code == 2 and "--quick" in missing.output
+
+
+def test_packaged_curricula_by_name_from_any_directory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from lanrocli.train.curriculum import packaged_curricula
+
+    monkeypatch.chdir(tmp_path)
+    named = runner.invoke(app, ["check", "reach"])
+    assert named.exit_code == 0, named.output
+    assert named.output == runner.invoke(app, ["check", str(packaged_curricula()["reach"])]).output
+    listed = runner.invoke(app, ["check"])
+    assert listed.exit_code == 0, listed.output
+    assert all(f"│ {name} " in listed.output for name in packaged_curricula())
+    for command in (["check", "pushh"], ["train", "pushh"]):
+        unknown = runner.invoke(app, command)
+        assert unknown.exit_code == 2, unknown.output
+        assert "pushh: no such file" in unknown.output and "grasp, lift, push, quick, reach" in unknown.output
+    assert not (tmp_path / "checkpoints").exists()
+
+
+def test_set_changes_the_plan_of_check_and_train_and_a_bad_key_is_located(tmp_path: Path) -> None:
+    shown = runner.invoke(app, ["check", "quick", "--set", "eval.episodes=7", "stages[0].budget.steps=99"])
+    assert shown.exit_code == 0, shown.output
+    assert "7 fresh episodes" in shown.output and "99 steps" in shown.output
+    out = tmp_path / "run"
+    for command in (["check", "quick"], ["train", "quick", "--out", str(out)]):
+        bad = runner.invoke(app, [*command, "--set", "eval.episodes=3", "agent.critcs=2"])
+        assert bad.exit_code == 2, bad.output
+        assert "--set agent.critcs=2: agent.critcs: unknown key 'critcs'; did you mean 'critics'?" in bad.output
+        malformed = runner.invoke(app, [*command, "--set", "critics"])
+        assert malformed.exit_code == 2 and "--set critics: expected KEY=VALUE" in malformed.output
+    assert not out.exists()
+    alone = runner.invoke(app, ["check", "--set", "eval.episodes=3"])
+    assert alone.exit_code == 2 and "--set needs the curriculum" in alone.output
 
 
 def test_check_reports_every_problem_with_its_place_and_exits_2(tmp_path) -> None:

@@ -111,11 +111,16 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         vocabulary: Vocabulary | None = None,
         holdout: Holdout = NOTHING_HELD_OUT,
         split: Split | None = None,
+        time_limit: bool = True,
         **changes: Any,
     ) -> None:
         """``settings`` (default: ``EnvSettings()``), with any of its fields changed by keyword, as
         ``gymnasium.make("lanro/Push-v0", objects=3)`` passes them. ``holdout``: what the episodes never
-        contain, except, with ``split``, the part held out for that generalisation split."""
+        contain, except, with ``split``, the part held out for that generalisation split.
+
+        ``time_limit=False`` leaves truncation by steps to a ``gymnasium.wrappers.TimeLimit`` around the
+        environment (``max_episode_steps`` is then None): ``gymnasium.make`` adds one with the limit asked
+        of it and never passes that limit here, so the registered ids make their environments this way."""
         settings = (settings or EnvSettings()).replace(**changes)
         slots = settings.objects if object_slots is None else object_slots
         if slots < settings.objects:
@@ -128,7 +133,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.n_objects = objects = settings.objects
         self.object_slots = slots
         self.render_mode = render_mode
-        self.max_episode_steps = settings.episode_limit
+        self.max_episode_steps = settings.episode_limit if time_limit else None
         self.vocabulary = vocabulary if vocabulary is not None else grammar_vocabulary()
         n = observation_size(slots)
         self.observation_space = gym.spaces.Dict(
@@ -243,7 +248,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         success = bool(self._achieved[self._scene.goal_index])
         # Truncated, not terminated: ending there must not look like the zero future value of a success.
         self._fell = not success and bool(self.objects.states().positions[self._scene.goal_index, 2] < FALLEN)
-        truncated = not success and (self._steps >= self.max_episode_steps or self._fell)
+        out_of_time = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
+        truncated = not success and (out_of_time or self._fell)
         return self._observation(), reward(success), success, truncated, self._info()
 
     # -- what the agent and the tools see --------------------------------------------------------------

@@ -46,7 +46,7 @@ class EnvSettings:
     rare_words: bool = field(default=False, metadata=_help("Allow rare colour words (the common-ground case)."))
     kinds: tuple[Kind, ...] | None = field(
         default=None,
-        metadata=_help(f"Kinds of correction, comma-separated from {','.join(Kind)} (default: all)."),
+        metadata=_help(f"Kinds of correction, comma-separated, of {', '.join(Kind)} (default: all)."),
     )
     max_episode_steps: int | None = field(
         default=None,

@@ -15,8 +15,9 @@ from typing import Any
 
 import yaml
 
-from lanrocli.sweep.plan import SWEEP_FILE, SweepSpec, flatten, show
+from lanrocli.sweep.plan import SWEEP_FILE, SweepSpec
 from lanrocli.train.curriculum import Curriculum
+from lanrocli.train.overrides import flatten, show
 from lanrocli.train.runfolder import CONFIG
 from lanrocli.train.yamlfile import CurriculumError, validate
 

@@ -1,10 +1,10 @@
 """A sweep's definition and its folder: the curriculum, the seeds, the settings changed for every trial and
 the grid, the trials they make, and ``sweep.yaml``, which records them.
 
-Settings are named by the curriculum's own key paths, as its error messages name them (``agent.critics``,
-``stages[0].budget.steps``, ``eval.episodes``), and their values are read as YAML (``2``, ``0.5``,
-``true``, ``[ambiguity]``). Every trial's curriculum is built and validated before any trial starts, each
-problem located at the option that caused it, so a grid with one bad value is refused as a whole.
+Settings are read as every command reads ``KEY=VALUE`` (:mod:`lanrocli.train.overrides`): by the
+curriculum's own key paths, values as YAML. Every trial's curriculum is built and validated before any
+trial starts, each problem located at the option that caused it, so a grid with one bad value is refused as
+a whole.
 
 The sweep folder holds one ordinary run folder per trial, named from its settings and seed
 (``agent.critics=2,seed=0``), and ``sweep.yaml``. A resumed sweep must be the sweep that was started: its
@@ -19,7 +19,6 @@ from __future__ import annotations
 import copy
 import difflib
 import itertools
-import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,10 +26,11 @@ from typing import Any
 
 import yaml
 
-from lanrocli.train.curriculum import Curriculum, CurriculumError
 from lanrocli.sweep.protocol import TrialJob
+from lanrocli.train.curriculum import Curriculum, CurriculumError
+from lanrocli.train.overrides import apply_settings, parse_key, read_settings, read_value, show, split_setting
 from lanrocli.train.runfolder import LOCK, run_ended, write_text
-from lanrocli.train.yamlfile import KeyPath, Marks, Problem, given_by, validate
+from lanrocli.train.yamlfile import Problem
 
 SWEEP_FILE = "sweep.yaml"
 STOP_FILE = ".stop"
@@ -38,39 +38,11 @@ STOP_FILE = ".stop"
 RAY_FOLDER = ".ray"
 """Ray Tune's own records of the sweep's trials (their logs and error tracebacks); nothing resumes from it."""
 
-_SEGMENT = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[\d+\])*)")
 _UNSAFE = re.compile(r"[^A-Za-z0-9._+-]+")
 
 
 class SweepError(ValueError):
     """A sweep that cannot start or resume as asked: its options, its folder or its record."""
-
-
-# -- key paths and values ----------------------------------------------------------------------------------
-
-
-def parse_key(text: str) -> KeyPath:
-    """``stages[0].budget.steps`` as ``("stages", 0, "budget", "steps")``."""
-    path: list[str | int] = []
-    for part in text.split("."):
-        match = _SEGMENT.fullmatch(part)
-        if match is None:
-            raise SweepError(f"{text!r} is not a key path such as agent.critics or stages[0].budget.steps")
-        path.append(match.group(1))
-        path.extend(int(index) for index in re.findall(r"\d+", match.group(2)))
-    return tuple(path)
-
-
-def format_key(path: KeyPath) -> str:
-    text = ""
-    for key in path:
-        text += f"[{key}]" if isinstance(key, int) else f".{key}" if text else str(key)
-    return text
-
-
-def show(value: Any) -> str:
-    """A value as it would be written on the command line."""
-    return value if isinstance(value, str) else json.dumps(value)
 
 
 def split_values(text: str) -> list[str]:
@@ -85,59 +57,6 @@ def split_values(text: str) -> list[str]:
         else:
             current += char
     return [*values, current]
-
-
-def _value(option: str, text: str) -> Any:
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        raise SweepError(f"{option}: {text!r} is not a YAML value: {getattr(error, 'problem', error)}") from None
-
-
-def _setting(option: str, text: str) -> tuple[str, str]:
-    key, equals, value = text.partition("=")
-    if not equals or not key:
-        raise SweepError(f"{option} {text}: expected KEY=VALUE, e.g. {option} agent.critics=2")
-    if parse_key(key)[0] == "seed":
-        raise SweepError(f"{option} {text}: give seeds with --seeds")
-    return key, value
-
-
-def _put(data: dict[str, Any], path: KeyPath, value: Any) -> None:
-    """Set ``path`` in ``data`` to ``value``; a missing key is added (the curriculum's check names it)."""
-    node: Any = data
-    for depth, key in enumerate(path):
-        where = format_key(path[: depth + 1])
-        last = depth == len(path) - 1
-        if isinstance(node, dict) and isinstance(key, str):
-            if last:
-                node[key] = value
-            else:
-                node = node.setdefault(key, {})
-        elif isinstance(node, list) and isinstance(key, int):
-            if key >= len(node):
-                raise SweepError(f"{where}: {format_key(path[:depth])} has {len(node)} items, [0] to [{len(node) - 1}]")
-            if last:
-                node[key] = value
-            else:
-                node = node[key]
-        else:
-            kind = "a list" if isinstance(node, list) else "a mapping" if isinstance(node, dict) else repr(node)
-            raise SweepError(f"{where}: {format_key(path[:depth]) or 'the curriculum'} is {kind}, which has no {key!r}")
-
-
-def flatten(data: Any, prefix: KeyPath = ()) -> dict[str, Any]:
-    """Every value of nested mappings and lists by its key path, as ``--set`` names them."""
-    if isinstance(data, dict):
-        items: Any = data.items()
-    elif isinstance(data, list):
-        items = enumerate(data)
-    else:
-        return {format_key(prefix): data}
-    flat: dict[str, Any] = {}
-    for key, value in items:
-        flat.update(flatten(value, (*prefix, key)))
-    return flat
 
 
 # -- the sweep ---------------------------------------------------------------------------------------------
@@ -172,7 +91,8 @@ class SweepSpec:
     def from_options(
         cls, base: Curriculum, curriculum: str, quick: bool, seeds: list[str], sets: list[str], grids: list[str]
     ) -> SweepSpec:
-        """The sweep the command line asks for; a malformed option is a ``SweepError`` naming it."""
+        """The sweep the command line asks for; a malformed option is a ``SweepError``, or a ``SettingError``
+        for ``--set`` and ``--grid`` as every command reads them, naming it."""
         chosen: list[int] = []
         for text in seeds:
             for part in text.split(","):
@@ -181,18 +101,13 @@ class SweepSpec:
                 if int(part) in chosen:
                     raise SweepError(f"--seeds: seed {int(part)} is given twice")
                 chosen.append(int(part))
-        changes: dict[str, Any] = {}
-        for text in sets:
-            key, value = _setting("--set", text)
-            if key in changes:
-                raise SweepError(f"--set {key} is given twice")
-            changes[key] = _value(f"--set {text}", value)
+        changes = read_settings("--set", sets, "--seeds")
         grid: dict[str, tuple[Any, ...]] = {}
         for text in grids:
-            key, value = _setting("--grid", text)
+            key, value = split_setting("--grid", text, "--seeds")
             if key in grid or key in changes:
                 raise SweepError(f"--grid {key} is given twice, or also with --set")
-            values = tuple(_value(f"--grid {text}", part) for part in split_values(value))
+            values = tuple(read_value(f"--grid {text}", part) for part in split_values(value))
             if len({show(v) for v in values}) < len(values):
                 raise SweepError(f"--grid {text}: a value is given twice")
             grid[key] = values
@@ -223,19 +138,9 @@ class SweepSpec:
         for trial in self.trials():
             data = copy.deepcopy(self.plan)
             data["seed"] = trial.seed
-            options = [("--set", k, v) for k, v in self.changes.items()] + [("--grid", k, v) for k, v in trial.settings.items()]
-            marks: Marks = {}
-            for option, key, value in options:
-                label = f"{option} {key}={show(value)}"
-                try:
-                    _put(data, parse_key(key), value)
-                except SweepError as error:
-                    problems.append(Problem(label, None, "", str(error)))
-                    continue
-                marks.update(given_by(label, [parse_key(key)]))
-            context = " ".join([self.curriculum, *(["with"] if options else []), *(f"{o} {k}={show(v)}" for o, k, v in options)])
+            settings = [("--set", k, v) for k, v in self.changes.items()] + [("--grid", k, v) for k, v in trial.settings.items()]
             try:
-                resolved.append((trial, validate(Curriculum, data, marks, context)))
+                resolved.append((trial, apply_settings(Curriculum, data, settings, self.curriculum)))
             except CurriculumError as error:
                 problems.extend(error.problems)
         if problems:

@@ -26,10 +26,20 @@ from lanrocli.choices import Kind, Split, Task
 from lanrocli.envs.scene import check_scenes
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.language.holdout import Holdout
+from lanrocli.train.overrides import apply_settings
 from lanrocli.train.seeds import FIELD
 from lanrocli.train.yamlfile import CurriculumError, KeyProblem, Problem, parse, read, validate
 
-__all__ = ["Curriculum", "CurriculumError", "Problem", "Stage", "builtin_curriculum", "load_curriculum"]
+__all__ = [
+    "Curriculum",
+    "CurriculumError",
+    "Problem",
+    "Stage",
+    "builtin_curriculum",
+    "find_curriculum",
+    "load_curriculum",
+    "packaged_curricula",
+]
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
 """Curriculum and stage names become folder names: no separators, no leading dot."""
@@ -38,9 +48,11 @@ QUICK_TEST_EPISODES = 40
 """Test episodes per agent and stage of a file scaled down by ``--quick``: enough to see the pipeline work,
 in seconds, not to tell one agent from another."""
 
+PACKAGED = "curricula"
+"""The package's folder of curricula (package data; the repository's top-level ``curricula/`` links to it)."""
 BUILTIN = "quick.yaml"
 """The curriculum ``lanro train --quick`` runs without a file, as written (its budgets are small already),
-shipped in the package's ``curricula``."""
+one of the packaged curricula."""
 
 
 class _Settings(BaseModel):
@@ -320,6 +332,13 @@ class Curriculum(BaseModel):
         data["buffer"]["size"] = min(data["buffer"]["size"], 100_000)
         return validate(Curriculum, data, {}, "<quick>")
 
+    def with_settings(self, settings: dict[str, Any], source: str) -> Curriculum:
+        """A copy with ``--set`` settings (key path -> value), checked like the file's: each problem is
+        located at the setting that caused it, or else named by ``source`` (the curriculum as the command
+        line named it) and the settings."""
+        changes = [("--set", key, value) for key, value in settings.items()]
+        return apply_settings(Curriculum, self.model_dump(mode="json"), changes, source)
+
     def with_overrides(self, seed: int | None = None, envs: int | None = None) -> Curriculum:
         """A copy with the command line's settings, checked like the file's."""
         data = self.model_dump()
@@ -328,9 +347,34 @@ class Curriculum(BaseModel):
         return validate(Curriculum, data, {}, "<command line>")
 
 
+def packaged_curricula() -> dict[str, Path]:
+    """The curricula that ship with the package, by name (``push`` for ``push.yaml``), so that ``lanro train
+    push`` runs the same file from any directory and any install. They are read as files, not as resources,
+    because ``extends`` names its parent by a path beside the file."""
+    folder = Path(str(files("lanrocli") / PACKAGED))
+    return {path.stem: path for path in sorted(folder.glob("*.yaml"))}
+
+
+def find_curriculum(text: str) -> Path:
+    """The curriculum file that ``text`` names: a file that exists, as given (it wins over a name); else a
+    packaged curriculum by its name, with or without ``.yaml``; else a path that exists, for reading to
+    say what it is. Anything else is a ``CurriculumError`` that lists the packaged names."""
+    path = Path(text)
+    if path.is_file():
+        return path
+    packaged = packaged_curricula()
+    if path.parent == Path(".") and path.name.removesuffix(".yaml") in packaged:
+        return packaged[path.name.removesuffix(".yaml")]
+    if path.exists():
+        return path
+    close = difflib.get_close_matches(path.name.removesuffix(".yaml"), packaged, n=1)
+    message = f"no such file, nor the name of a packaged curriculum; give a YAML file or one of: {', '.join(packaged)}"
+    raise CurriculumError([Problem(text, None, "", message + (f" (did you mean {close[0]}?)" if close else ""))])
+
+
 def builtin_curriculum() -> Curriculum:
     """The curriculum ``lanro train --quick`` runs without a file, checked exactly as a file would be."""
-    resource = files("lanrocli.curricula") / BUILTIN
+    resource = packaged_curricula()[Path(BUILTIN).stem]
     data, marks = parse(resource.read_text(encoding="utf-8"), BUILTIN)
     return validate(Curriculum, data, marks, BUILTIN)
 

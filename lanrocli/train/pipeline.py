@@ -52,7 +52,6 @@ from lanrocli.train.runfolder import (
     CheckpointError,
     RunError,
     RunLock,
-    TensorBoard,
     align_metrics,
     append_metrics,
     best_checkpoint,
@@ -73,7 +72,8 @@ from lanrocli.train.runfolder import (
 )
 from lanrocli.train.seeds import evaluation_seed
 from lanrocli.train.checkpoint import resolve_checkpoint
-from lanrocli.train.testset import CORRECTION_QUOTA, checkpoint_name, correction_test, measure, split_test
+from lanrocli.train.tensorboard import TensorBoard
+from lanrocli.train.testset import CORRECTION_QUOTA, Measurement, checkpoint_name, correction_test, measure, split_test
 from lanrocli.train.trainer import Trainer, TrainSettings
 
 Loaded = TypeVar("Loaded")
@@ -129,20 +129,26 @@ class RunState:
 
 
 def _once_per_agent(
-    folder: Path, names: list[str], measured: Callable[[Path], dict[str, Any]]
-) -> dict[str, dict[str, Any]]:
+    folder: Path, names: list[str], measured: Callable[[Path], Measurement]
+) -> dict[str, Measurement]:
     """``measured`` of each pointer of ``names`` in a stage's ``folder``, measured once per agent: ``best``
     taken at the stage's last evaluation is the ``last`` agent (the same step, the same weights), and its
-    record is the other's under its own checkpoint name."""
-    records: dict[str, dict[str, Any]] = {}
-    by_step: dict[str, dict[str, Any]] = {}
+    measurement is the other's, its record under its own checkpoint name."""
+    measurements: dict[str, Measurement] = {}
+    by_step: dict[str, Measurement] = {}
     for name in names:
         directory = resolve_checkpoint(folder / name)
         step = directory.name.rsplit("-", 1)[-1]
         if step not in by_step:
             by_step[step] = measured(directory)
-        records[name] = {**by_step[step], "checkpoint": checkpoint_name(directory)}
-    return records
+        found = by_step[step]
+        record = {**found.record, "checkpoint": checkpoint_name(directory)}
+        measurements[name] = dataclasses.replace(found, record=record)
+    return measurements
+
+
+def _records(measurements: dict[str, Measurement]) -> dict[str, dict[str, Any]]:
+    return {name: measurement.record for name, measurement in measurements.items()}
 
 
 class RunObserver:
@@ -193,7 +199,9 @@ class CurriculumRun:
         self.notes = notes or []
         """What starting or resuming did that the user should know (a start over, a fallback)."""
         self._lock = lock
-        self._tensorboard = TensorBoard.open(out, purge_step=trainer.progress.env_steps)
+        self._tensorboard = TensorBoard.open(out, trainer.progress.env_steps, curriculum.eval.every)
+        if trainer.progress.env_steps == 0:
+            self._tensorboard.hyperparameters(curriculum)
         if not state.finished and trainer.settings.stage != state.stage:
             # The checkpoint was written as its stage ended: the next stage starts from here.
             self._enter(state.stage)
@@ -284,11 +292,16 @@ class CurriculumRun:
                 self.observer.on_stage_start(self, stage)
             used = self.trainer.progress.env_steps - start
             target = start + min((used // every + 1) * every, stage.budget.steps)
-            if not self.trainer.run(target, should_stop, lambda _: self.observer.on_step(self)):
+            if not self.trainer.run(target, should_stop, self._on_step):
                 self._checkpoint(stage_index=self.state.stage, best=False)
                 return False
             self._evaluate(stage)
         return True
+
+    def _on_step(self, trainer: Trainer) -> None:
+        figures = {**trainer.last_metrics, "train_success": trainer.train_success}
+        self._tensorboard.train(trainer.progress.env_steps, figures)
+        self.observer.on_step(self)
 
     def _evaluate(self, stage: Stage) -> None:
         trainer, state = self.trainer, self.state
@@ -307,7 +320,7 @@ class CurriculumRun:
             state.best = score
         row = self._row(stage, report, value, holds)
         append_metrics(self.out / METRICS, row)
-        self._tensorboard.write(row)
+        self._tensorboard.evaluation(row)
         self.observer.on_evaluation(self, row)
 
         used = trainer.progress.env_steps - state.stage_start
@@ -337,6 +350,7 @@ class CurriculumRun:
             self.observer.on_stage_end(self, result)
             if not state.finished:
                 self._enter(state.stage)
+        self._tensorboard.mark(trainer.progress.env_steps)
 
     def _test(self, result: StageResult) -> None:
         """The stage's last and best agents on its held-out test episodes, read back from their
@@ -348,26 +362,33 @@ class CurriculumRun:
         episodes = self.curriculum.test.episodes
         device = self.trainer.device
         agents = [name for name in (LAST, BEST) if (folder / name).is_file()]
-        record = _once_per_agent(folder, agents, lambda path: measure(path, episodes, device).record)
+        tested = _once_per_agent(folder, agents, lambda path: measure(path, episodes, device))
+        record: dict[str, Any] = _records(tested)
+        figures = {name: measurement.report.metrics() for name, measurement in tested.items()}
         if self.state.finished and result is self.state.results[-1]:
             plain = {"correction_rate": 0.0}
-            record[LANGUAGE] = {
-                shown.value: measure(folder / LAST, episodes, device, plain, instruction=shown).record
-                for shown in Instruction
+            language = {
+                shown.value: measure(folder / LAST, episodes, device, plain, instruction=shown) for shown in Instruction
             }
+            record[LANGUAGE] = _records(language)
             quota = CORRECTION_QUOTA.scaled(episodes)
-            record[CORRECTION_TEST] = _once_per_agent(
-                folder, agents, lambda path: correction_test(path, quota, device).record
-            )
+            corrections = _once_per_agent(folder, agents, lambda path: correction_test(path, quota, device))
+            record[CORRECTION_TEST] = _records(corrections)
+            measured = {LANGUAGE: language, CORRECTION_TEST: corrections}
             splits = self.trainer.settings.holdout.splits
             if splits:
-                record[SPLITS] = {split.value: self._split_test(folder, agents, split) for split in splits}
+                split_tests = {split.value: self._split_test(folder, agents, split) for split in splits}
+                record[SPLITS] = {split: _records(by_agent) for split, by_agent in split_tests.items()}
+                measured |= {f"{SPLITS}/{split}": by_agent for split, by_agent in split_tests.items()}
+            for kind, by_name in measured.items():
+                figures |= {f"{kind}/{name}": measurement.report.metrics() for name, measurement in by_name.items()}
         write_json(folder / TEST, record)
         write_report(self.out, self.curriculum, self.state)
+        self._tensorboard.test(result.end, figures)
 
-    def _split_test(self, folder: Path, agents: list[str], split: Split) -> dict[str, dict[str, Any]]:
+    def _split_test(self, folder: Path, agents: list[str], split: Split) -> dict[str, Measurement]:
         episodes, device = self.curriculum.test.episodes, self.trainer.device
-        return _once_per_agent(folder, agents, lambda path: split_test(path, split, episodes, device).record)
+        return _once_per_agent(folder, agents, lambda path: split_test(path, split, episodes, device))
 
     def complete_tests(self) -> None:
         """Measure stages that ended but were not measured yet: a run killed while testing does it on resume."""

@@ -11,7 +11,8 @@ The run folder holds everything a researcher looks at or resumes from::
     stage-K-NAME/last, best      pointers to the newest step-N and to best-N
     stage-K-NAME/test.json       the stage's last and best agents on its held-out test episodes
                                  (the last stage's also on the correction test)
-    events.*                     TensorBoard scalars, when the tensorboard package is installed
+    events.*                     TensorBoard events, when the tensorboard package is installed
+                                 (:mod:`lanrocli.train.tensorboard`)
     .lock                        locked by the process that writes the run (names it)
     set-aside/                   checkpoints newer than the one a run resumed from after damage
 
@@ -24,8 +25,7 @@ One process writes a run folder at a time: it holds an OS lock on ``.lock``, whi
 the process ends however it ends, so a killed run never leaves a stale lock. Readers (``lanro eval``,
 ``lanro plot``) do not take it.
 
-This module loads neither torch nor pybullet (TensorBoard's writer aside, imported when a run opens it),
-so plotting and reading a run folder stay quick.
+This module loads neither torch nor pybullet, so plotting and reading a run folder stay quick.
 """
 
 from __future__ import annotations
@@ -394,35 +394,6 @@ def truncate_metrics(path: Path, env_steps: int) -> None:
     kept = [r for r in rows if int(r["env_steps"]) <= env_steps]
     if len(kept) < len(rows):
         _write_metrics(path, header, kept)
-
-
-class TensorBoard:
-    """Evaluation scalars as TensorBoard events when the optional ``tensorboard`` package is installed."""
-
-    def __init__(self, writer: Any) -> None:
-        self._writer = writer
-
-    @classmethod
-    def open(cls, out: Path, purge_step: int) -> TensorBoard:
-        try:
-            # Here and not at the top: the writer comes with torch, which readers of a run folder do not need.
-            from torch.utils.tensorboard import SummaryWriter
-        except ImportError:
-            return cls(None)
-        # purge_step drops events a killed run wrote after the checkpoint it resumes from.
-        return cls(SummaryWriter(str(out), purge_step=purge_step or None))
-
-    def write(self, row: dict[str, Any]) -> None:
-        if self._writer is None:
-            return
-        for name, value in row.items():
-            if isinstance(value, (int, float)) and name != "env_steps":
-                self._writer.add_scalar(f"eval/{name}", value, row["env_steps"])
-        self._writer.flush()
-
-    def close(self) -> None:
-        if self._writer is not None:
-            self._writer.close()
 
 
 # -- report.md ---------------------------------------------------------------------------------------------

@@ -24,7 +24,7 @@ from lanrocli.agent.buffer import ReplayBuffer
 from lanrocli.agent.networks import ObjectLayout
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings, SACSettings
-from lanrocli.choices import Task
+from lanrocli.choices import Task, check_device
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
 from lanrocli.envs.evaluation import EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
@@ -117,12 +117,8 @@ def pick_device(requested: str | None) -> torch.device:
     """
     if requested is None:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    try:
-        device = torch.device(requested)
-    except RuntimeError:
-        device = None
-    if device is None or device.type not in ("cpu", "cuda"):
-        raise ValueError(f"--device {requested!r} is not a device lanro runs on; use cpu, cuda or cuda:N")
+    check_device(requested)
+    device = torch.device(requested)
     if device.type == "cuda":
         count = torch.cuda.device_count() if torch.cuda.is_available() else 0
         if count == 0:

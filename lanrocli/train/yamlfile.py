@@ -237,7 +237,7 @@ def _repeated_keys(node: yaml.Node, file: Path | str, prefix: KeyPath) -> Iterat
             earlier = first.setdefault((key.tag, key.value), key)
             if earlier is not key:
                 message = f"set again here, after line {earlier.start_mark.line + 1}; delete one of the two"
-                yield Problem(file, key.start_mark.line + 1, _format_path(prefix + (key.value,)), message)
+                yield Problem(file, key.start_mark.line + 1, format_key(prefix + (key.value,)), message)
             yield from _repeated_keys(value, file, prefix + (key.value,))
     elif isinstance(node, yaml.SequenceNode):
         for index, item in enumerate(node.value):
@@ -298,10 +298,11 @@ def _problem(root: type[BaseModel], details: ErrorDetails, marks: Marks, file: P
         loc += error.key
     # The deepest key of the path that the file has: a missing key is reported at its parent.
     where = next((marks[loc[:end]] for end in range(len(loc), 0, -1) if loc[:end] in marks), _Mark(file, None))
-    return Problem(where.file, where.line, _format_path(loc), _message(root, details))
+    return Problem(where.file, where.line, format_key(loc), _message(root, details))
 
 
-def _format_path(loc: KeyPath) -> str:
+def format_key(loc: KeyPath) -> str:
+    """``("stages", 0, "budget")`` as ``stages[0].budget``, as messages and ``--set`` name keys."""
     text = ""
     for key in loc:
         text += f"[{key}]" if isinstance(key, int) else f".{key}" if text else str(key)

@@ -89,6 +89,16 @@ def wait_for_rows(out: Path, n: int, process: subprocess.Popen[str]) -> None:
     wait_until(lambda: (out / METRICS).is_file() and len(rows(out)) >= n, process, f"{n} evaluations")
 
 
+def scalars(out: Path, tag: str) -> list[tuple[int, float]]:
+    """The points of ``tag`` in the TensorBoard events of the run in ``out``, every process's file read in turn,
+    as TensorBoard shows them: what a resumed run purged is gone."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    accumulator = EventAccumulator(str(out))
+    accumulator.Reload()
+    return [(event.step, event.value) for event in accumulator.Scalars(tag)]
+
+
 def outcome(out: Path) -> tuple[list[dict[str, str]], list[tuple[str, int, int, str]], list[dict]]:
     """Everything a run produced that must not depend on interruptions (wall time aside)."""
     metrics = [{k: v for k, v in r.items() if k != "wall_time"} for r in rows(out)]

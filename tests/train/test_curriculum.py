@@ -21,7 +21,9 @@ from lanrocli.train.curriculum import (
     Problem,
     builtin_curriculum,
     diff_curricula,
+    find_curriculum,
     load_curriculum,
+    packaged_curricula,
 )
 
 MINIMAL = """\
@@ -411,6 +413,30 @@ def test_builtin_curriculum() -> None:
     assert (single.env.correction_rate, corrections.env.correction_rate, negations.env.correction_rate) == (0, 0.5, 0.5)
     assert (corrections.env.negations, negations.env.negations, negations.promote) == (False, True, None)
     assert [stage.env.settings().episode_limit for stage in curriculum.stages] == [15, 30, 30]
+
+
+def test_packaged_curricula_are_the_package_data_the_repository_links_to() -> None:
+    packaged = packaged_curricula()
+    assert set(packaged) >= {*TASKS, "quick"}
+    shipped = Path(__file__).parents[2] / "lanrocli" / "curricula"
+    assert all(path.parent.resolve() == shipped.resolve() and path.is_file() for path in packaged.values())
+    assert (Path(__file__).parents[2] / "curricula").resolve() == shipped.resolve()
+
+
+def test_a_curriculum_is_found_by_its_file_or_by_its_packaged_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)  # a directory with no curricula of its own
+    packaged = packaged_curricula()
+    assert find_curriculum("push") == find_curriculum("push.yaml") == packaged["push"]
+    assert load_curriculum(find_curriculum("lift")).task == Task.LIFT  # its extends chain resolves beside it
+    own = write(tmp_path, "push", MINIMAL)  # a file that exists wins over a packaged name
+    assert find_curriculum("push").resolve() == own.resolve() and find_curriculum(str(own)) == own
+    with pytest.raises(CurriculumError) as caught:
+        find_curriculum("reech")
+    (problem,) = caught.value.problems
+    assert problem.file == "reech" and "one of: " + ", ".join(packaged) in problem.message
+    assert "did you mean reach?" in problem.message
+    with pytest.raises(CurriculumError, match="no such file"):
+        find_curriculum("elsewhere/push.yaml")  # a path with a folder is a path, never a name
 
 
 def test_diff_curricula(tmp_path: Path) -> None:

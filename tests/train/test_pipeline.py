@@ -13,9 +13,10 @@ import pytest
 from lanrocli.choices import CorrectionForm, Split
 from lanrocli.envs.evaluation import EvaluationReport
 from lanrocli.envs.figures import EpisodeResult, wilson_interval
+from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.checkpoint import AGENT_FILE, resolve_checkpoint
 from lanrocli.train.curriculum import Curriculum, load_curriculum
-from lanrocli.train.pipeline import CurriculumRun, RunError, _once_per_agent, _restore_files
+from lanrocli.train.pipeline import CurriculumRun, RunError, _once_per_agent, _records, _restore_files
 from lanrocli.train.runfolder import (
     CONFIG,
     CORRECTION_TEST,
@@ -29,9 +30,10 @@ from lanrocli.train.runfolder import (
     write_pointer,
 )
 from lanrocli.train.seeds import correction_test_seed, evaluation_seed, held_out_seed, split_test_seed
-from lanrocli.train.testset import CORRECTION_QUOTA, correction_test, split_test
+from lanrocli.train.testset import CORRECTION_QUOTA, Measurement, correction_test, split_test
+from lanrocli.train.trainer import TrainSettings
 
-from .runs import Baseline, outcome, rows, tiny, train, wait_for_rows
+from .runs import Baseline, outcome, rows, scalars, tiny, train, wait_for_rows
 
 
 def report(successes: list[bool], corrected: list[bool] | None = None) -> EvaluationReport:
@@ -243,6 +245,8 @@ def test_interrupted_runs_resume_to_the_same_result(tmp_path: Path, how: signal.
 
     assert outcome(tmp_path / "cut") == outcome(straight.out)
     assert [s[0] for s in outcome(tmp_path / "cut")[1]] == ["first", "second", "third"]
+    for tag in ("eval/success", "test/last/success"):  # what the stopped process wrote after its checkpoint is purged
+        assert scalars(tmp_path / "cut", tag) == scalars(straight.out, tag)
 
 
 def test_a_best_agent_that_is_the_last_one_is_measured_once(tmp_path: Path) -> None:
@@ -251,15 +255,16 @@ def test_a_best_agent_that_is_the_last_one_is_measured_once(tmp_path: Path) -> N
         (tmp_path / name / AGENT_FILE).write_bytes(b"")
     calls: list[str] = []
 
-    def measured(path: Path) -> dict:
+    def measured(path: Path) -> Measurement:
         calls.append(path.name)
-        return {"checkpoint": path.name, "success": len(calls)}
+        record = {"checkpoint": path.name, "success": len(calls)}
+        return Measurement(TrainSettings(task="reach"), EnvSettings(), 0, True, report([True]), record)
 
     write_pointer(tmp_path / "last", "step-0000000020")
     write_pointer(tmp_path / "best", "best-0000000020")
-    records = _once_per_agent(tmp_path, ["last", "best"], measured)
+    records = _records(_once_per_agent(tmp_path, ["last", "best"], measured))
     assert calls == ["step-0000000020"] and records["last"]["success"] == records["best"]["success"] == 1
     assert records["best"]["checkpoint"].endswith("best-0000000020")
     write_pointer(tmp_path / "best", "best-0000000010")
-    records = _once_per_agent(tmp_path, ["last", "best"], measured)
+    records = _records(_once_per_agent(tmp_path, ["last", "best"], measured))
     assert calls[1:] == ["step-0000000020", "best-0000000010"] and records["best"]["success"] == 3
