@@ -12,11 +12,12 @@ the same episodes as a person typing them:
 1. An episode's scene is drawn (episode i uses seed ``seed + i - 1``) and its objects are shown; the next
    line is the instruction.
 2. The agent acts ``steps_per_line`` steps, then the next line is read: text is a correction, appended to
-   the instruction (a later correction replaces an earlier one, since the agent was trained on one
-   instruction and at most one correction); an empty line lets the agent go on. Once the input has
+   the sentence, after any earlier one, as long as the whole still fits the sentences the agent reads
+   (an agent trained with ``max_corrections`` above 1 reads chains of them); an empty line lets the agent
+   go on. Once the input has
    ended, no line is waited for.
 3. The episode ends when the task holds for the object the sentence singles out, at the step limit, or
-   when an object falls off the table.
+   when that object falls off the table.
 4. The next line is the next episode's instruction, until the input ends or ``episodes`` were played.
 
 An instruction that cannot be read (an empty line, or more words than the agent reads) is asked for again
@@ -113,22 +114,28 @@ class Description:
 
 @dataclass(frozen=True)
 class Utterance:
-    """What the person has said in an episode: the instruction, and the correction appended to it if any."""
+    """What the person has said in an episode: the instruction, and the corrections appended to it, the
+    last one ``correction`` and those before it ``earlier``."""
 
     instruction: tuple[str, ...]
     correction: tuple[str, ...] | None = None
+    earlier: tuple[tuple[str, ...], ...] = ()
+
+    @property
+    def corrections(self) -> tuple[tuple[str, ...], ...]:
+        return (*self.earlier, self.correction) if self.correction else ()
 
     @property
     def text(self) -> str:
         """The sentence the agent reads (g_l o g_ac, as the instructor extends its goal)."""
-        return extend(" ".join(self.instruction), " ".join(self.correction) if self.correction else None)
+        return extend(" ".join(self.instruction), *(" ".join(c) for c in self.corrections))
 
     @property
     def length(self) -> int:
-        return len(self.instruction) + len(self.correction or ())
+        return len(self.instruction) + sum(len(c) for c in self.corrections)
 
     def corrected(self, words: tuple[str, ...]) -> Utterance:
-        return Utterance(self.instruction, words)
+        return Utterance(self.instruction, words, self.corrections)
 
     def fitting(self, objects: Sequence[ObjectProps]) -> list[int]:
         """The indices of the objects the sentence can mean.
@@ -139,15 +146,12 @@ class Utterance:
         named the wrong object ("push the red cube" + "actually the blue cube", or "... not the red cube").
         """
         meant = {i for i, o in enumerate(objects) if Description.of(self.instruction).matches(o)}
-        if self.correction is None:
-            return sorted(meant)
-        said = Description.of(self.correction, correction=True)
-        named = {i for i, o in enumerate(objects) if said.matches(o)}
-
-        def kept(pool: set[int]) -> set[int]:
-            return pool - named if said.negation else pool & named
-
-        return sorted(kept(meant) or kept(set(range(len(objects)))))
+        for words in self.corrections:  # each correction narrows what is left, as the instructor's chains do
+            said = Description.of(words, correction=True)
+            named = {i for i, o in enumerate(objects) if said.matches(o)}
+            pools = (meant, set(range(len(objects))))
+            meant = next((left for pool in pools if (left := pool - named if said.negation else pool & named)), set())
+        return sorted(meant)
 
 
 @dataclass(frozen=True)
@@ -172,7 +176,7 @@ class Grammar:
             return False
         if " ".join(utterance.instruction) not in self.instructions:
             return False
-        return utterance.correction is None or " ".join(utterance.correction) in self.corrections
+        return all(" ".join(words) in self.corrections for words in utterance.corrections)
 
 
 def unknown_words(words: Sequence[str], vocabulary: Vocabulary) -> list[str]:
@@ -402,7 +406,7 @@ class Session:
                     time.sleep(CONTROL_DT)
                 self._show_step(steps, utterance, observation, info, target)
                 success = target is not None and bool(info["achieved"][target])
-                fallen = bool(np.any(info["object_positions"][:, 2] < FALLEN))
+                fallen = target is not None and bool(info["object_positions"][target, 2] < FALLEN)
                 if success or fallen or steps >= limit:
                     return self._end(number, utterance, objects, target, success, fallen, steps, frames)
             line = self.lines.read("correction, or Enter to go on")
@@ -414,8 +418,6 @@ class Session:
                         f"{self.vocabulary.max_length}: correction not given"
                     )
                     continue
-                if utterance.correction:
-                    self.say(f"'{' '.join(words)}' replaces the correction '{' '.join(utterance.correction)}'")
                 utterance = corrected
                 self.say(f"correction at step {steps}: the agent now reads '{utterance.text}'")
                 target = self._heard(utterance, words, objects)
@@ -453,7 +455,7 @@ class Session:
         if success and goal is not None:
             self.say(f"episode {number}: success at step {steps}: the task holds for the {name(goal)}", style="bold green")
         else:
-            why = "an object fell off the table" if fallen else "the step limit"
+            why = "the goal fell off the table" if fallen else "the step limit"
             if goal is None:
                 why += "; the sentence singled out no object"
             self.say(f"episode {number}: no success in {steps} steps ({why})", style="bold red")

@@ -192,3 +192,13 @@ def test_a_sentence_singles_out_objects_as_the_instructor_means_them() -> None:
     assert fitting("push the green cube") == [], "no green cube on the table"
     assert fitting("push the red blue cube") == []
     assert fitting("push it") == [RED, BLUE, GREEN]
+
+
+def test_a_chain_of_corrections_narrows_what_is_left_each_time() -> None:
+    said = Utterance(words_of("push the cube object"))
+    said = said.corrected(words_of("not the red cube")).corrected(words_of("not the blue cube"))
+    assert said.text == "push the cube object not the red cube not the blue cube" and said.length == 12
+    yellow = ObjectProps("yellow", "cube")
+    assert said.fitting((RED, BLUE, yellow)) == [2]
+    assert Utterance(words_of("push the cube object"), words_of("not the red cube")).fitting((RED, BLUE, yellow)) == [1, 2]
+    assert said in Grammar.of("push")

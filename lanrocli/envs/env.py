@@ -12,7 +12,7 @@ from lanrocli.envs.instructor import Instructor
 from lanrocli.envs.scene import Scene, check_scenes, sample_scene
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.tasks import TaskView, make_task
-from lanrocli.language import COLOURS, SHAPES, Vocabulary, grammar_vocabulary
+from lanrocli.language import COLOURS, SHAPES, Vocabulary, grammar_vocabulary, max_sentence_words
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.reward import reward
 from lanrocli.sim import (
@@ -134,7 +134,14 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.object_slots = slots
         self.render_mode = render_mode
         self.max_episode_steps = settings.episode_limit if time_limit else None
-        self.vocabulary = vocabulary if vocabulary is not None else grammar_vocabulary()
+        self.vocabulary = vocabulary if vocabulary is not None else grammar_vocabulary(settings.max_corrections)
+        longest = max_sentence_words(settings.max_corrections)
+        if self.vocabulary.max_length < longest:
+            raise ValueError(
+                f"sentences of up to {settings.max_corrections} corrections have up to {longest} words, and this "
+                f"vocabulary encodes at most {self.vocabulary.max_length}: lower max_corrections, or use an agent "
+                "trained to read that many"
+            )
         n = observation_size(slots)
         self.observation_space = gym.spaces.Dict(
             {

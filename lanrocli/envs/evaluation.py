@@ -16,6 +16,7 @@ import numpy as np
 from lanrocli.choices import CorrectionForm, Instruction
 from lanrocli.language import TASK_VERBS, identifying_phrases, instruction, pick
 from lanrocli.envs.figures import ATTENTION, FIGURE, FIGURES, PHASES, PLAIN, EpisodeResult, Rate, _rate
+from lanrocli.envs.instructor import MAX_CORRECTIONS
 from lanrocli.reward import reward
 
 if TYPE_CHECKING:
@@ -121,6 +122,7 @@ class EvaluationReport:
                 k: {**r.as_dict(), "corrected": corrected_by_kind[k].as_dict()} for k, r in self.by_kind().items()
             },
             "by_form": {form: r.as_dict() for form, r in self.by_form().items()},
+            "by_index": {str(i): self.rate(f"corrected_success_after_{i}").as_dict() for i in range(2, MAX_CORRECTIONS + 1)},
             "by_negation": {k: r.as_dict() for k, r in self.by_negation().items()},
             ATTENTION: self.attention_on_goal(),
         }
@@ -190,6 +192,7 @@ def run_episode(
         form=None if correction is None else CorrectionForm(correction["form"]),
         returned=total,
         attention={phase: (sum(values), len(values)) for phase, values in shares.items()},
+        corrections=0 if correction is None else int(correction["index"]),
     )
 
 

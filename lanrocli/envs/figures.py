@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from lanrocli.choices import CorrectionForm, Kind
+from lanrocli.envs.instructor import MAX_CORRECTIONS
 
 JUDGED = 30
 """Spoken corrections of one kind or form below which its success is shown but not judged: with fewer, its
@@ -50,6 +51,8 @@ class EpisodeResult:
     attention: Mapping[str, tuple[float, int]] = field(default_factory=dict)
     """Per phase (``PHASES``) the episode went through: the sum over its steps of the share of attention on
     the goal, and the number of those steps. Empty for a policy without attention."""
+    corrections: int = 0
+    """How many corrections were spoken (more than one only where a stage allows chains of them)."""
 
     @property
     def corrected(self) -> bool:
@@ -144,6 +147,22 @@ def _kind_figures(kind: Kind) -> tuple[Figure, Figure]:
     )
 
 
+ORDINALS = {2: "second"}
+"""The words for the corrections after the first, up to ``MAX_CORRECTIONS``."""
+
+
+def _index_figure(index: int) -> Figure:
+    """Episodes in which at least ``index`` corrections were spoken: how the agent does once corrected again."""
+    return Figure(
+        f"corrected_success_after_{index}",
+        f"corrected_episodes_after_{index}",
+        f"after a {ORDINALS[index]} correction",
+        lambda r: r.corrections >= index,
+        ("by_index", str(index)),
+        split=True,
+    )
+
+
 def _form_figure(form: CorrectionForm) -> Figure:
     """Episodes whose spoken correction took ``form``; negations were kept under ``by_negation`` before."""
     article = "an" if form.value[0] in "aeiou" else "a"
@@ -171,6 +190,7 @@ FIGURES: tuple[Figure, ...] = (
     Figure("corrected_success", "corrected_episodes", "corrected", lambda r: r.corrected, ("corrected",)),
     *(figure for kind in Kind for figure in _kind_figures(kind)),
     *(_form_figure(form) for form in CorrectionForm),
+    *(_index_figure(index) for index in range(2, MAX_CORRECTIONS + 1)),
 )
 """The registry of the success rates every tool reports."""
 

@@ -1,10 +1,14 @@
-"""The synthetic instructor: speaks the episode's instruction, watches the arm, and corrects it once.
+"""The synthetic instructor: speaks the episode's instruction, watches the arm, and corrects it.
 
 In a correction episode the instructor sets up one of the paper's misunderstandings (or simply waits for
 the arm's own mistake). When the task condition holds for a non-goal object, it schedules a correction
 after a delay of 0..max_delay steps; the correction then extends the goal sentence (g_l o g_ac). The goal
 object never changes: reward is always for the object the instructor means, which is why achieving the
 wrongly named object in an instruction correction episode does not end the episode.
+
+With ``max_corrections`` above 1 the dialogue goes on while the arm keeps acting on yet another wrong
+object: each further correction is appended to the sentence and singles out the goal among the candidates
+not ruled out yet, as conversational repair continues until the misunderstanding is resolved.
 """
 
 from __future__ import annotations
@@ -33,6 +37,10 @@ from lanrocli.envs.scene import Scene
 MAX_DELAY = 20
 """Most steps a correction may wait after the mistake: later, the arm has long moved on."""
 
+MAX_CORRECTIONS = 2
+"""Most corrections in one episode: each needs a wrong object the arm has not been corrected on yet, and
+a scene has at most three objects."""
+
 
 @dataclass(frozen=True)
 class InstructorSettings:
@@ -43,6 +51,8 @@ class InstructorSettings:
     max_delay: int = 0
     rare_words: bool = False
     kinds: tuple[Kind, ...] = tuple(Kind)
+    max_corrections: int = 1
+    """Most corrections in one episode (the paper: 1)."""
     negation_rate: float | None = None
     """``None``: a correction's form is drawn uniformly among the allowed ones, as in the paper (a third are
     negations). A number: the share of corrections that are negations, wherever a negation can single out
@@ -66,6 +76,8 @@ class InstructorSettings:
         if repeated:
             raise ValueError(f"kinds names {', '.join(repeated)} more than once")
         object.__setattr__(self, "kinds", kinds)
+        if not isinstance(self.max_corrections, (int, np.integer)) or not 1 <= self.max_corrections <= MAX_CORRECTIONS:
+            raise ValueError(f"max_corrections must be a whole number within [1, {MAX_CORRECTIONS}], got {self.max_corrections!r}")
         if self.negation_rate is not None:
             if not 0.0 <= self.negation_rate <= 1.0:
                 raise ValueError(f"negation_rate must be within [0, 1], got {self.negation_rate}")
@@ -89,6 +101,8 @@ class Correction:
     text: str
     spoken_at: int
     triggered_at: int
+    index: int = 1
+    """Which correction of the episode this is: 1 for the first."""
 
     @property
     def negation(self) -> bool:
@@ -102,6 +116,7 @@ class Correction:
             "text": self.text,
             "spoken_at": self.spoken_at,
             "triggered_at": self.triggered_at,
+            "index": self.index,
         }
 
 
@@ -116,20 +131,27 @@ class Instructor:
     split: Split | None = None
     challenge: Kind | None = field(default=None, init=False)
     instruction_text: str = field(default="", init=False)
-    spoken: Correction | None = field(default=None, init=False)
+    corrections: list[Correction] = field(default_factory=list, init=False)
+    """The corrections spoken so far, in order."""
     _scene: Scene | None = field(default=None, init=False)
     _phrase: Phrase | None = field(default=None, init=False)
     _delay: int = field(default=0, init=False)
     _trigger: tuple[int, int] | None = field(default=None, init=False)  # (step, touched object)
+    _corrected: set[int] = field(default_factory=set, init=False)  # the wrong objects already corrected on
 
     def __post_init__(self) -> None:
         check_task(self.task)
         self.holdout.check_split(self.split)
 
     @property
+    def spoken(self) -> Correction | None:
+        """The correction spoken last, or None before any."""
+        return self.corrections[-1] if self.corrections else None
+
+    @property
     def text(self) -> str:
-        """The current goal sentence: the instruction, extended by the correction once spoken."""
-        return extend(self.instruction_text, self.spoken.text if self.spoken else None)
+        """The current goal sentence: the instruction, extended by each correction spoken."""
+        return extend(self.instruction_text, *(c.text for c in self.corrections))
 
     def draw_challenge(self, rng: np.random.Generator) -> Kind | None:
         """Whether the next episode is a correction episode, and of which kind (drawn before the scene)."""
@@ -138,7 +160,8 @@ class Instructor:
         return None
 
     def start(self, rng: np.random.Generator, scene: Scene, challenge: Kind | None) -> None:
-        self._scene, self.challenge, self.spoken, self._trigger = scene, challenge, None, None
+        self._scene, self.challenge, self._trigger = scene, challenge, None
+        self.corrections, self._corrected = [], set()
         first, last = self.holdout.delays(self.settings.max_delay, self.split)
         self._delay = int(rng.integers(first, last + 1))
         named = None
@@ -153,18 +176,22 @@ class Instructor:
 
     def observe(self, rng: np.random.Generator, step: int, achieved: np.ndarray) -> bool:
         """Watch the state after ``step``; return True when the goal sentence changed at this step."""
-        if self.challenge is None or self.spoken is not None or self._scene is None:
+        if self.challenge is None or len(self.corrections) >= self.settings.max_corrections or self._scene is None:
             return False
         if self._trigger is None:
-            wrong = np.flatnonzero(achieved)
-            wrong = wrong[wrong != self._scene.goal_index]
-            if wrong.size == 0:
+            wrong = [int(i) for i in np.flatnonzero(achieved) if i != self._scene.goal_index and i not in self._corrected]
+            if not wrong:
                 return False
             self._trigger = (step, int(pick(rng, wrong)))
+            if self.corrections:  # each further correction waits a delay of its own
+                first, last = self.holdout.delays(self.settings.max_delay, self.split)
+                self._delay = int(rng.integers(first, last + 1))
         triggered_at, touched = self._trigger
         if step < triggered_at + self._delay:
             return False
-        self.spoken = self._correct(rng, step, triggered_at, touched)
+        self.corrections.append(self._correct(rng, step, triggered_at, touched))
+        self._corrected.add(touched)
+        self._trigger = None
         return True
 
     @property
@@ -182,14 +209,15 @@ class Instructor:
     def _correct(self, rng: np.random.Generator, step: int, triggered_at: int, touched: int) -> Correction:
         assert self._scene is not None and self.challenge is not None and self._phrase is not None
         objects, goal = self._scene.objects, self._scene.goal_index
-        considered = candidates(self.challenge, self._phrase, objects)
+        considered = candidates(self.challenge, self._phrase, objects) - self._corrected
+        index = len(self.corrections) + 1
         form = self._form(rng)
         if form is CorrectionForm.NEGATION:
             negations = self.holdout.correction_phrases(negation_phrases(objects, goal, touched, considered), self.split)
             if negations:
                 text = correction(BEGINNING_WORDS[form][0], pick(rng, negations))
-                return Correction(self.challenge, form, text, step, triggered_at)
+                return Correction(self.challenge, form, text, step, triggered_at, index)
             form = pick(rng, NAMING_FORMS)
         naming = self.holdout.correction_phrases(naming_phrases(objects, goal, considered), self.split)
         text = correction(pick(rng, BEGINNING_WORDS[form]), pick(rng, naming))
-        return Correction(self.challenge, form, text, step, triggered_at)
+        return Correction(self.challenge, form, text, step, triggered_at, index)

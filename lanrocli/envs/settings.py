@@ -43,6 +43,13 @@ class EnvSettings:
         ),
     )
     max_delay: int = field(default=0, metadata=_help("Corrections arrive 0..MAX_DELAY steps after the mistake."))
+    max_corrections: int = field(
+        default=1,
+        metadata=_help(
+            "Most corrections per episode: while the arm acts on yet another wrong object, the instructor "
+            "corrects again, each correction appended to the sentence (default 1, the paper's)."
+        ),
+    )
     rare_words: bool = field(default=False, metadata=_help("Allow rare colour words (the common-ground case)."))
     kinds: tuple[Kind, ...] | None = field(
         default=None,
@@ -93,6 +100,7 @@ class EnvSettings:
             negations=self.negations,
             negation_rate=self.negation_rate,
             max_delay=self.max_delay,
+            max_corrections=self.max_corrections,
             rare_words=self.rare_words,
             kinds=tuple(Kind) if self.kinds is None else tuple(self.kinds),
         )

@@ -139,9 +139,10 @@ def correction(beginning: str, phrase: Phrase) -> str:
     return f"{beginning} {ARTICLE} {phrase.words}"
 
 
-def extend(instruction_text: str, correction_text: str | None) -> str:
-    """The goal after a correction: the instruction followed by the correction (g_l o g_ac)."""
-    return instruction_text if not correction_text else f"{instruction_text} {correction_text}"
+def extend(instruction_text: str, *corrections: str | None) -> str:
+    """The goal after corrections: the instruction followed by each correction in the order spoken
+    (g_l o g_ac, and on for a chain of them)."""
+    return " ".join([instruction_text, *(c for c in corrections if c)])
 
 
 @dataclass(frozen=True)
@@ -213,12 +214,13 @@ def sample_sentence(
     return Sentence(text, ctext, phrase.form, kind)
 
 
-def max_sentence_words() -> int:
-    """L: the most words an extended instruction can have, over every task and option."""
+def max_sentence_words(corrections: int = 1) -> int:
+    """L: the most words an instruction extended by up to ``corrections`` corrections can have, over every
+    task and option."""
     verb = max(len(v.split()) for verbs in TASK_VERBS.values() for v in verbs)
     phrase = max(len(p.words.split()) for p in all_phrases(rare=True))
     beginning = max(len(b.split()) for words in BEGINNING_WORDS.values() for b in words)
-    return (verb + 1 + phrase) + (beginning + 1 + phrase)
+    return (verb + 1 + phrase) + corrections * (beginning + 1 + phrase)
 
 
 def grammar_words() -> list[str]:

@@ -122,9 +122,10 @@ def stable_order(words: Iterable[str], listed: Sequence[str]) -> list[str]:
 
 
 @cache
-def grammar_vocabulary() -> Vocabulary:
-    """The vocabulary of every word any stage may speak, in stable id order, with L from the grammar."""
-    return Vocabulary(stable_order(grammar_words(), listed_words()), max_sentence_words())
+def grammar_vocabulary(corrections: int = 1) -> Vocabulary:
+    """The vocabulary of every word any stage may speak, in stable id order, with L from the grammar for
+    sentences of up to ``corrections`` corrections."""
+    return Vocabulary(stable_order(grammar_words(), listed_words()), max_sentence_words(corrections))
 
 
 def agent_vocabulary(saved: dict[str, Any] | None, vocab_size: int) -> Vocabulary:

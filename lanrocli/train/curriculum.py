@@ -311,6 +311,12 @@ class Curriculum(BaseModel):
         return max(stage.env.objects for stage in self.stages)
 
     @property
+    def max_corrections(self) -> int:
+        """The most corrections any stage speaks in one episode: the agent's sentences need room for them
+        from the start."""
+        return max(stage.env.max_corrections for stage in self.stages)
+
+    @property
     def total_steps(self) -> int:
         return sum(stage.budget.steps for stage in self.stages)
 

@@ -454,6 +454,7 @@ def _train_settings(curriculum: Curriculum) -> TrainSettings:
         updates_per_step=curriculum.updates_per_step,
         buffer=curriculum.buffer.settings(),
         object_slots=curriculum.max_objects,
+        max_corrections=curriculum.max_corrections,
         stage=0,
         holdout=curriculum.holdout.settings(),
     )

@@ -65,6 +65,9 @@ class TrainSettings:
     sets the most objects of any of its stages, so one network serves all of them."""
     stage: int = 0
     """Index of the stage in its curriculum: the environments of each stage get their own seeds."""
+    max_corrections: int | None = None
+    """The most corrections any stage speaks in one episode: the sentences the agent reads have room for
+    them from the start; ``None``: the stage's."""
     holdout: Holdout = NOTHING_HELD_OUT
     """What the curriculum keeps out of training, to test the final agent on (its generalisation splits)."""
 
@@ -80,6 +83,11 @@ class TrainSettings:
         object.__setattr__(self, "task", Task(self.task))
         if self.object_slots is not None and self.object_slots < self.env.objects:
             raise ValueError(f"object_slots {self.object_slots} is fewer than the stage's objects")
+
+    @property
+    def sentence_corrections(self) -> int:
+        """How many corrections the agent's sentences have room for."""
+        return max(self.max_corrections or 1, self.env.max_corrections)
 
     @property
     def slots(self) -> int:
@@ -187,7 +195,7 @@ class Trainer:
         self.settings = settings
         self.agent_settings = agent_settings
         self.device = torch.device(device)
-        self.vocabulary = vocabulary if vocabulary is not None else grammar_vocabulary()
+        self.vocabulary = vocabulary if vocabulary is not None else grammar_vocabulary(settings.sentence_corrections)
         obs_dim = observation_size(settings.slots)
         action_dim = make_task(settings.task).action_size
         layout = ObjectLayout(ARM_SIZE, OBJECT_SIZE, settings.slots)

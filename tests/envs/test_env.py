@@ -336,3 +336,11 @@ def test_the_goal_falling_off_the_table_truncates_the_episode_another_object_lan
     assert truncated and not terminated and reward == -1.0 and info["object_positions"][goal, 2] < -0.1
     assert info["fell"]  # the learner tells this end from the time limit's
     env.close()
+
+
+def test_chains_of_corrections_get_room_in_the_sentence() -> None:
+    env = LanroEnv("push", objects=3, mode="colour_shape", correction_rate=1.0, negations=True, max_corrections=2)
+    assert env.vocabulary.max_length == 16 == env.observation_space["instruction"].shape[0]
+    env.close()
+    with pytest.raises(ValueError, match="encodes at most 10"):
+        LanroEnv("push", objects=3, max_corrections=2, vocabulary=grammar_vocabulary())

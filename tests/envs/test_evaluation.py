@@ -209,3 +209,18 @@ def test_other_names_another_object_and_is_judged_on_it(env: LanroEnv) -> None:
             if instruction(verb, phrase) == text
         }
         assert len(named) == 1 and goal not in named, text
+
+
+def test_per_correction_counts_add_up() -> None:
+    results = [
+        EpisodeResult(success, 5, Kind.WRONG_OBJECT, None if n == 0 else CorrectionForm.EXCUSE, -4.0, corrections=n)
+        for success, n in [(True, 0), (True, 1), (False, 1), (True, 2), (False, 2), (False, 2)]
+    ]
+    record = EvaluationReport(results).as_dict()
+    after_second = record["by_index"]["2"]
+    assert after_second["episodes"] == 3 and after_second["success"] == pytest.approx(1 / 3)
+    assert record["corrected"]["episodes"] == 5  # the first correction counts every corrected episode
+    only_one = [r for r in results if r.corrections == 1]
+    assert len(only_one) + after_second["episodes"] == record["corrected"]["episodes"]
+    metrics = EvaluationReport(results).metrics()
+    assert metrics["corrected_episodes_after_2"] == 3

@@ -263,3 +263,55 @@ def test_negation_rate_needs_negations() -> None:
         InstructorSettings(correction_rate=1.0, negation_rate=0.5)
     with pytest.raises(ValueError, match="negation_rate"):
         InstructorSettings(correction_rate=1.0, negations=True, negation_rate=1.5)
+
+
+def chain_episode(seed: int, max_corrections: int) -> tuple[Instructor, Scene, list[int]]:
+    """An episode whose arm does the task on each wrong object in turn, from step 3, 20 steps apart."""
+    rng = np.random.default_rng(seed)
+    settings = InstructorSettings(correction_rate=1.0, negations=True, max_delay=5, max_corrections=max_corrections)
+    instructor = Instructor("push", settings)
+    challenge = instructor.draw_challenge(rng)
+    objects, goal = sample_objects(rng, Mode.COLOUR_SHAPE, 3, challenge is Kind.AMBIGUITY)
+    scene = Scene(objects, goal, np.zeros((3, 2)))
+    instructor.start(rng, scene, challenge)
+    wrong = [i for i in rng.permutation(3).tolist() if i != goal]
+    achieved = np.zeros(3, dtype=bool)
+    for step in range(1, 60):
+        for k, index in enumerate(wrong):
+            achieved[index] = step >= 3 + 20 * k
+        instructor.observe(rng, step, achieved)
+    return instructor, scene, wrong
+
+
+def test_a_chain_of_corrections_singles_out_the_goal_among_what_is_left_each_time() -> None:
+    from lanrocli.envs.instructor import MAX_CORRECTIONS
+    from lanrocli.language import max_sentence_words
+    from lanrocli.language.dialogue import candidates, matching
+
+    lengths = {1: 0, 2: 0}
+    for seed in range(300):
+        instructor, scene, wrong = chain_episode(seed, MAX_CORRECTIONS)
+        assert len(instructor.text.split()) <= max_sentence_words(MAX_CORRECTIONS)
+        assert [c.index for c in instructor.corrections] == list(range(1, len(instructor.corrections) + 1))
+        assert instructor.text == " ".join([instructor.instruction_text, *(c.text for c in instructor.corrections)])
+        left = candidates(instructor.challenge, instructor._phrase, scene.objects)
+        for correction, touched in zip(instructor.corrections, wrong):
+            words = correction.text.split()
+            named = parse_object(words[-2:])
+            fitting = {i for i, o in enumerate(scene.objects) if fits(named, o)}
+            left -= set(wrong[: correction.index - 1])
+            if correction.negation:
+                assert touched in fitting and left - fitting == {scene.goal_index}, instructor.text
+            else:
+                assert left & fitting == {scene.goal_index}, instructor.text
+        lengths[len(instructor.corrections)] += 1
+    assert lengths[2] > 100  # the checks above ran on chains
+    single, _, _ = chain_episode(0, 1)
+    assert len(single.corrections) == 1
+
+
+def test_max_corrections_is_checked() -> None:
+    with pytest.raises(ValueError, match="max_corrections must be a whole number within"):
+        InstructorSettings(max_corrections=3)
+    with pytest.raises(ValueError, match="max_corrections"):
+        InstructorSettings(max_corrections=0)

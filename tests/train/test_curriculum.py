@@ -77,6 +77,7 @@ def test_env_section_is_the_environments_settings() -> None:
         "negations": False,
         "negation_rate": None,
         "max_delay": 0,
+        "max_corrections": 1,
         "rare_words": False,
         "kinds": ["ambiguity"],
         "max_episode_steps": None,

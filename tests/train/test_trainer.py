@@ -81,6 +81,18 @@ def test_random_starts_are_for_training_only() -> None:
     evaluation.close()
 
 
+def test_sentences_have_room_for_the_longest_chain_of_corrections_from_the_first_stage() -> None:
+    chained = dataclasses.replace(SETTINGS, max_corrections=2)  # a later stage corrects twice
+    trainer = Trainer(chained, AGENT)
+    env = trainer.env_factory()()
+    try:
+        assert trainer.vocabulary.max_length == trainer.buffer.vocabulary.max_length == 16
+        assert env.observation_space["instruction"].shape == (16,) and env.reset(seed=0)[0]["instruction"].shape == (16,)
+    finally:
+        env.close()
+        trainer.close()
+
+
 LEVERS = (
     dataclasses.replace(
         SETTINGS,
