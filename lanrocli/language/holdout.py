@@ -7,7 +7,7 @@ the drop from the in-distribution figure is the price of that one difference.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -59,15 +59,7 @@ class Holdout:
         pairs = tuple(parse_pair(p) if isinstance(p, str) else p for p in self.pairs)
         object.__setattr__(self, "pairs", pairs)
         _distinct(list(pairs), "pairs")
-        words = tuple(self.correction_words)
-        object.__setattr__(self, "correction_words", words)
-        _distinct(list(words), "correction_words")
-        unknown = [w for w in words if w not in SHAPE_OF_WORD]
-        if unknown:
-            raise ValueError(
-                f"correction_words holds out shape words, and {', '.join(map(repr, unknown))} is none; "
-                f"the shape words are {', '.join(SHAPE_OF_WORD)}"
-            )
+        words = self._known_words("correction_words", SHAPE_OF_WORD, "shape words")
         if words:
             for shape in SHAPES:
                 mine = [w for w in words if SHAPE_OF_WORD[w] == shape]
@@ -82,21 +74,23 @@ class Holdout:
             if not 0 < first <= last:
                 raise ValueError(f"late_corrections is [first, last] delay with 0 < first <= last, got {[first, last]}")
             object.__setattr__(self, "late_corrections", (first, last))
-        rare = tuple(self.common_ground)
-        object.__setattr__(self, "common_ground", rare)
-        _distinct(list(rare), "common_ground")
-        unknown = [w for w in rare if w not in RARE_WORD_COLOURS]
-        if unknown:
-            raise ValueError(
-                f"common_ground holds out rare colour words, and {', '.join(map(repr, unknown))} is none; "
-                f"the rare words are {', '.join(RARE_WORD_COLOURS)}"
-            )
+        rare = self._known_words("common_ground", RARE_WORD_COLOURS, "rare colour words")
         for colour, options in RARE_COLOUR_WORDS.items():
             if all(w in rare for w in options):
                 raise ValueError(
                     f"common_ground holds out every rare word for {colour} ({', '.join(options)}); keep one "
                     "for training's common-ground episodes"
                 )
+
+    def _known_words(self, key: str, known: Mapping[str, str], what: str) -> tuple[str, ...]:
+        """The words of field ``key`` as a tuple, each once and each one of ``known``, or a ValueError."""
+        words = tuple(getattr(self, key))
+        object.__setattr__(self, key, words)
+        _distinct(list(words), key)
+        unknown = [w for w in words if w not in known]
+        if unknown:
+            raise ValueError(f"{key} holds out {what}, and {', '.join(map(repr, unknown))} is none; the {what} are {', '.join(known)}")
+        return words
 
     @property
     def splits(self) -> tuple[Split, ...]:
