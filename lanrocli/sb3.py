@@ -1,10 +1,11 @@
 """A stable-baselines3 features extractor that reads lanro's instruction as a sentence.
 
-SB3's default ``MultiInputPolicy`` sees the instruction, once :class:`~lanrocli.wrappers.MultiDiscreteInstruction`
-declares it, as L one-hot words side by side: enough to learn from, but "the cube" at the third word and
-at the fourth are unrelated inputs to it, and a correction moves the object phrase. :class:`LanguageExtractor`
-reads the words in order with lanro's own sentence encoder (a word embedding and a GRU), as lanro's agent
-does. This module imports stable-baselines3; :mod:`lanrocli.wrappers` does not.
+SB3's default ``MultiInputPolicy`` sees the instruction, once
+:class:`~lanrocli.wrappers.MultiDiscreteInstruction` declares it, as L one-hot words side by side: enough to
+learn from, but the same word third and fourth in a sentence are unrelated inputs to it, and a correction's
+words stand wherever its instruction ended. :class:`LanguageExtractor` reads the words in order with lanro's
+own sentence encoder (a word embedding and a GRU), as lanro's agent does. This module imports
+stable-baselines3; :mod:`lanrocli.wrappers` does not.
 """
 
 from __future__ import annotations
@@ -39,11 +40,12 @@ class LanguageExtractor(BaseFeaturesExtractor):
     SB3 one-hot encodes a ``MultiDiscrete`` entry before any features extractor sees it (``preprocess_obs``
     in the policy's ``extract_features``; an extractor cannot opt out), so the instruction arrives as
     float [B, L * V], the one-hot rows of its L words side by side. Taking each row's argmax gives back the
-    exact ids, since each row holds a single 1, and the embedding then looks them up. Multiplying the
-    one-hot rows by the embedding's weights would give the same vectors but would train the padding row,
-    which ``padding_idx`` keeps at zero; and keeping the instruction a ``Box`` of ids for this path alone
-    would leave the default policy reading ids as numbers. The GRU's state after the last true word is the
-    summary (:class:`~lanrocli.agent.encoder.LanguageEncoder`), so padding is never read as words.
+    exact ids, since each row holds a single 1. The encoder needs the ids, not only their embeddings (which
+    multiplying the rows by the embedding's weights would give): it finds each sentence's last true word by
+    its padding, its GRU's state there being the summary, so padding is never read as words
+    (:class:`~lanrocli.agent.encoder.LanguageEncoder`). Keeping the instruction a ``Box`` of ids for this
+    extractor instead would need a second wrapper, and leaving the extractor out would then read ids as
+    numbers again.
     """
 
     def __init__(

@@ -33,7 +33,7 @@ class MultiDiscreteInstruction(
 
     It records its (empty) constructor arguments, as gymnasium's own wrappers do, so the wrapped
     environment's ``spec`` names it and ``gymnasium.make(env.spec)`` builds the same stack again, as
-    ``check_env`` and vectorising helpers do.
+    ``check_env`` does.
     """
 
     def __init__(self, env: gym.Env[dict[str, np.ndarray], np.ndarray]) -> None:

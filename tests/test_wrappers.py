@@ -99,6 +99,18 @@ def test_sb3_default_policy_one_hot_encodes_each_word() -> None:
     env.close()
 
 
+def test_flattened_for_cleanrl_the_words_are_one_hot_before_the_observation_vector() -> None:
+    env = gym.wrappers.FlattenObservation(MultiDiscreteInstruction(gym.make("lanro/Reach-v0")))
+    vocabulary = grammar_vocabulary()
+    words = len(vocabulary) * vocabulary.max_length
+    assert env.observation_space.shape == (words + observation_size(2),)
+    flat, info = env.reset(seed=4)
+    one_hot = flat[:words].reshape(vocabulary.max_length, len(vocabulary))
+    assert (one_hot.sum(axis=1) == 1).all()
+    assert vocabulary.decode(one_hot.argmax(axis=1)) == info["instruction_text"]
+    env.close()
+
+
 def test_importing_the_wrappers_loads_neither_torch_nor_stable_baselines3() -> None:
     code = (
         "import sys, lanrocli.wrappers\n"
