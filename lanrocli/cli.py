@@ -450,7 +450,7 @@ def _split_test(path: Path, split: Split, episodes: int | None) -> Measure:
 
 def _measure_checkpoint(path: Path, task: Task | None, device: str | None, run: Measure) -> Measurement:
     """The trained agent at ``path`` measured as ``run`` does; every problem is a clear error."""
-    from lanrocli.train.runfolder import CheckpointError
+    from lanrocli.train.errors import CheckpointError
     from lanrocli.train.trainer import pick_device
 
     if not path.exists():
@@ -651,7 +651,8 @@ def train_command(
     from lanrocli.display import StopRequest, TrainingDisplay
     from lanrocli.train.checkpoint import CheckpointWriteError
     from lanrocli.train.curriculum import CurriculumError
-    from lanrocli.train.pipeline import CurriculumRun, RunError
+    from lanrocli.train.errors import RunError
+    from lanrocli.train.pipeline import CurriculumRun
     from lanrocli.train.trainer import pick_device
 
     if out is None:

@@ -17,7 +17,8 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from lanrocli.stop import StopRequest
 from lanrocli.train.curriculum import Stage
-from lanrocli.train.pipeline import CurriculumRun, RunObserver, StageResult
+from lanrocli.train.pipeline import CurriculumRun, RunObserver
+from lanrocli.train.runstate import StageResult
 
 __all__ = ["StopRequest", "TrainingDisplay"]
 

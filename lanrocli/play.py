@@ -62,7 +62,7 @@ from lanrocli.language import (
 )
 from lanrocli.language.vocabulary import UNK
 from lanrocli.sim import CONTROL_DT
-from lanrocli.train.runfolder import CheckpointError
+from lanrocli.train.errors import CheckpointError
 from lanrocli.train.trainer import AgentPolicy, load_policy, pick_device
 
 COLOUR_OF_WORD: Mapping[str, str] = {**{c: c for c in COLOURS}, **RARE_WORD_COLOURS}

@@ -29,7 +29,8 @@ import yaml
 from lanrocli.sweep.protocol import TrialJob
 from lanrocli.train.curriculum import Curriculum, CurriculumError
 from lanrocli.train.overrides import apply_settings, parse_key, read_settings, read_value, show, split_setting
-from lanrocli.train.runfolder import LOCK, run_ended, write_text
+from lanrocli.train.runreport import run_ended
+from lanrocli.train.writing import LOCK, write_text
 from lanrocli.train.yamlfile import Problem
 
 SWEEP_FILE = "sweep.yaml"

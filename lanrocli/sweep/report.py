@@ -30,18 +30,9 @@ from lanrocli.envs.figures import FIGURE, FIGURES, JUDGED, Figure
 from lanrocli.stats import CONFIDENCE, IQM_RUNS, REPS, Estimate, bootstrap, iqm, probability_of_improvement
 from lanrocli.sweep.groups import Group, group_runs
 from lanrocli.train.generalisation import SPLIT_FIGURES, SplitFigure, drop
-from lanrocli.train.runfolder import (
-    CONFIG,
-    CORRECTION_TEST,
-    LATEST,
-    SPLITS,
-    STATE_FILE,
-    TEST,
-    CheckpointError,
-    read_pointer,
-    run_ended,
-    stage_folder,
-)
+from lanrocli.train.errors import CheckpointError
+from lanrocli.train.runfolder import CONFIG, CORRECTION_TEST, LATEST, SPLITS, STATE_FILE, TEST, read_pointer, stage_folder
+from lanrocli.train.runreport import run_ended
 
 STEPS = "stage_steps"
 

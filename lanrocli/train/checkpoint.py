@@ -19,7 +19,6 @@ replay buffer and the training loop, which are read into the training settings.
 from __future__ import annotations
 
 import errno
-import hashlib
 import io
 import json
 import os
@@ -36,22 +35,14 @@ import torch
 
 from lanrocli.agent.buffer import ReplayBuffer
 from lanrocli.agent.settings import MOVED, SACSettings
-from lanrocli.train.runfolder import (
-    LATEST,
-    STATE_FILE,
-    CheckpointError,
-    fsync_dir,
-    fsync_file,
-    read_pointer,
-    temporary,
-)
+from lanrocli.train.errors import CheckpointError
+from lanrocli.train.manifest import MANIFEST_FILE, verify_checkpoint, write_manifest
+from lanrocli.train.runfolder import LATEST, STATE_FILE, read_pointer
+from lanrocli.train.writing import fsync_dir, fsync_file, temporary
 
 AGENT_FILE = "agent.pt"
 BUFFER_FILE = "buffer.npz"
 PARTIAL_FILE = "partial.npz"
-MANIFEST_FILE = "manifest.json"
-FORMAT = 2
-"""The checkpoint format this version writes: 2 added ``manifest.json``; 1 is read too."""
 RESUMABLE_FILES = (AGENT_FILE, BUFFER_FILE, STATE_FILE, PARTIAL_FILE)
 
 T = TypeVar("T")
@@ -139,8 +130,7 @@ def _write_files(tmp: Path, contents: Checkpoint) -> None:
         _write_buffer(tmp / BUFFER_FILE, contents.buffer)
         _write_partials(tmp / PARTIAL_FILE, contents.partials)
         names += [BUFFER_FILE, PARTIAL_FILE]
-    manifest = {"format": FORMAT, "files": {name: _fingerprint(tmp / name) for name in names}}
-    (tmp / MANIFEST_FILE).write_text(json.dumps(manifest, indent=1))
+    write_manifest(tmp, names)
     for name in [*names, MANIFEST_FILE]:
         fsync_file(tmp / name)
 
@@ -184,14 +174,6 @@ def _tensors(value: Any) -> list[torch.Tensor]:
     if isinstance(value, (list, tuple)):
         return [t for v in value for t in _tensors(v)]
     return []
-
-
-def _fingerprint(path: Path) -> dict[str, Any]:
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return {"bytes": path.stat().st_size, "sha256": digest.hexdigest()}
 
 
 def _plain_state(contents: Checkpoint) -> dict[str, Any]:
@@ -253,33 +235,6 @@ def load_checkpoint(directory: Path, device: str | torch.device = "cpu", resumab
         )
     except (KeyError, TypeError, ValueError) as error:
         raise CheckpointError(f"{directory / STATE_FILE} is damaged: {error!r} is missing or wrong") from None
-
-
-def verify_checkpoint(directory: Path, names: tuple[str, ...] = RESUMABLE_FILES) -> None:
-    """Check ``names`` against the checkpoint's manifest (size, then SHA-256); a checkpoint written before
-    manifests existed passes unchecked. Raises a ``CheckpointError`` naming the first damaged file."""
-    path = directory / MANIFEST_FILE
-    if not path.is_file():
-        return  # format 1: its files are checked as they are read
-    try:
-        manifest = json.loads(path.read_text())
-        version, files = int(manifest["format"]), manifest["files"]
-    except (ValueError, KeyError, TypeError, UnicodeDecodeError):
-        raise CheckpointError(f"{path} is damaged: it is not the manifest lanro writes") from None
-    if version > FORMAT:
-        raise CheckpointError(f"{directory} has checkpoint format {version}; this lanro reads up to {FORMAT}: upgrade it")
-    for name in names:
-        expected = files.get(name)
-        if expected is None:
-            raise CheckpointError(f"{directory} cannot be used: its manifest lists no {name}")
-        file = directory / name
-        if not file.is_file():
-            raise CheckpointError(f"{file} is missing")
-        size = file.stat().st_size
-        if size != expected["bytes"]:
-            raise CheckpointError(f"{file} is damaged: {size:,} bytes where {expected['bytes']:,} were written")
-        if _fingerprint(file)["sha256"] != expected["sha256"]:
-            raise CheckpointError(f"{file} is damaged: its contents differ from what was written (SHA-256)")
 
 
 def _reading(path: Path, read: Callable[[Path], T]) -> T:

@@ -12,143 +12,49 @@ enough corrections and negations were spoken to judge each kind and form. A chec
 evaluation and every interruption, so a resumed run repeats nothing and skips nothing: it ends with the
 same stages, step counts and, on CPU, the same numbers as a run that was never stopped.
 
-Every state a kill, a full disk or a damaged file can leave continues with one of two commands: a folder
-holding no checkpoint yet is started over by either a fresh start or ``--resume``; a damaged newest
-checkpoint makes ``--resume`` fall back to the newest whole one, setting the newer ones aside. Each
-checkpoint carries copies of ``config.yaml`` and ``metrics.csv`` as they were when it was written, so a
-resumed run rewrites both from it, whatever happened to them since.
-
-What the run writes, and where, is :mod:`lanrocli.train.runfolder`'s business.
+What the run writes, and where, is :mod:`lanrocli.train.runfolder`'s business; how it continues after a
+kill or a damaged checkpoint, :mod:`lanrocli.train.recovery`'s.
 """
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
-from dataclasses import dataclass, field
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 import torch
 
-from lanrocli.choices import Instruction, Split
 from lanrocli.envs.evaluation import EvaluationReport
-from lanrocli.envs.figures import Rate, wilson_interval
-from lanrocli.train.curriculum import Curriculum, CurriculumError, Promote, Stage, diff_curricula, load_curriculum
-from lanrocli.train.runfolder import (
-    AGENT_METRICS,
-    BEST,
-    CONFIG,
-    CORRECTION_TEST,
-    SPLITS,
-    LANGUAGE,
-    LAST,
-    LATEST,
-    METRICS,
-    LOCK,
-    SET_ASIDE,
-    TEST,
-    CheckpointError,
-    RunError,
-    RunLock,
-    align_metrics,
-    append_metrics,
-    best_checkpoint,
-    checkpoint_steps,
+from lanrocli.train.curriculum import Curriculum, Stage, diff_curricula
+from lanrocli.train.errors import RunError
+from lanrocli.train.recovery import (
     clear_leftovers,
     is_leftover,
-    publish,
-    read_pointer,
-    repoint,
+    newest_whole,
+    released_on_error,
+    restore_files,
     resumable_candidates,
-    set_aside,
+    saved_plan,
+)
+from lanrocli.train.runfolder import (
+    AGENT_METRICS,
+    CONFIG,
+    LATEST,
+    METRICS,
+    TEST,
+    append_metrics,
+    best_checkpoint,
+    publish,
     stage_folder,
     step_checkpoint,
-    truncate_metrics,
-    write_json,
-    write_report,
-    write_text,
 )
+from lanrocli.train.runreport import write_report
+from lanrocli.train.runstate import RunState, StageResult, pooled_rule, watched
 from lanrocli.train.seeds import evaluation_seed
-from lanrocli.train.checkpoint import resolve_checkpoint
 from lanrocli.train.tensorboard import TensorBoard
-from lanrocli.train.testset import CORRECTION_QUOTA, Measurement, checkpoint_name, correction_test, measure, split_test
+from lanrocli.train.testset import measure_stage
 from lanrocli.train.trainer import Trainer, TrainSettings
-
-Loaded = TypeVar("Loaded")
-
-
-@dataclass
-class StageResult:
-    """How a finished stage went; the rows of ``report.md``."""
-
-    index: int
-    name: str
-    start: int
-    end: int
-    ended: str
-    """``promoted`` when the rule held, ``budget`` when the budget ran out first."""
-    evaluations: int
-    rule_value: float | None
-    """What the promotion rule saw at the stage's last evaluation (pooled); None without a rule."""
-    wall_time: float
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> StageResult:
-        return cls(**{f.name: data.get(f.name) for f in dataclasses.fields(cls)})
-
-
-@dataclass
-class RunState:
-    """Where the run is in its curriculum; saved in every checkpoint beside the trainer's own state."""
-
-    stage: int = 0
-    stage_start: int = 0
-    evaluations: int = 0
-    """Evaluations so far in the current stage."""
-    window: list[tuple[int, int]] = field(default_factory=list)
-    """(successes, episodes) on what the rule watches, for the stage's last ``patience`` evaluations."""
-    best: float | None = None
-    """Best success so far in this stage on one evaluation, on what its rule watches (overall without a
-    rule); -1 while no evaluation had such episodes."""
-    finished: bool = False
-    stopped_early: bool = False
-    """The run ended at a stage whose budget ran out with ``on_budget: stop``."""
-    results: list[StageResult] = field(default_factory=list)
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> RunState:
-        known = {f.name for f in dataclasses.fields(cls)}
-        results = [StageResult.from_dict(r) for r in data.get("results", [])]
-        window = [(int(k), int(n)) for k, n in data.get("window", [])]
-        return cls(**{**{k: v for k, v in data.items() if k in known}, "results": results, "window": window})
-
-
-def _once_per_agent(
-    folder: Path, names: list[str], measured: Callable[[Path], Measurement]
-) -> dict[str, Measurement]:
-    """``measured`` of each pointer of ``names`` in a stage's ``folder``, measured once per agent: ``best``
-    taken at the stage's last evaluation is the ``last`` agent (the same step, the same weights), and its
-    measurement is the other's, its record under its own checkpoint name."""
-    measurements: dict[str, Measurement] = {}
-    by_step: dict[str, Measurement] = {}
-    for name in names:
-        directory = resolve_checkpoint(folder / name)
-        step = directory.name.rsplit("-", 1)[-1]
-        if step not in by_step:
-            by_step[step] = measured(directory)
-        found = by_step[step]
-        record = {**found.record, "checkpoint": checkpoint_name(directory)}
-        measurements[name] = dataclasses.replace(found, record=record)
-    return measurements
-
-
-def _records(measurements: dict[str, Measurement]) -> dict[str, dict[str, Any]]:
-    return {name: measurement.record for name, measurement in measurements.items()}
+from lanrocli.train.writing import LOCK, RunLock, write_json, write_text
 
 
 class RunObserver:
@@ -162,20 +68,6 @@ class RunObserver:
 
     def on_stage_end(self, run: CurriculumRun, result: StageResult) -> None: ...
 
-
-def watched(stage: Stage, report: EvaluationReport) -> Rate:
-    """The episodes the stage's rule watches (all of them without a rule)."""
-    return report.corrected if stage.promote is not None and stage.promote.on == "corrected" else report.overall
-
-
-def pooled_rule(promote: Promote, window: list[tuple[int, int]]) -> tuple[float | None, bool]:
-    """The rule's value on the pooled episodes of ``window`` and whether it holds: only once ``patience``
-    evaluations are pooled, so a stage is never promoted on fewer episodes than its rule asks for."""
-    successes, episodes = sum(k for k, _ in window), sum(n for _, n in window)
-    if episodes == 0:
-        return None, False
-    value = successes / episodes if promote.statistic == "mean" else wilson_interval(successes, episodes)[0]
-    return value, len(window) >= promote.patience and value >= promote.success
 
 
 class CurriculumRun:
@@ -217,7 +109,7 @@ class CurriculumRun:
         if out.exists() and not out.is_dir():
             raise RunError(f"{out} is a file, not a run folder; choose another folder with --out")
         lock = RunLock(out)
-        with _released_on_error(lock):
+        with released_on_error(lock):
             entries = [entry for entry in out.iterdir() if entry.name != LOCK]
             if not all(is_leftover(entry) for entry in entries):
                 raise RunError(
@@ -255,15 +147,15 @@ class CurriculumRun:
         if not out.is_dir():
             raise RunError(f"{out} holds no run to resume; start one without --resume")
         lock = RunLock(out)
-        with _released_on_error(lock):
+        with released_on_error(lock):
             candidates = resumable_candidates(out)
             if not candidates and not (out / LATEST).exists():
-                plan = curriculum or _saved_plan(out)
+                plan = curriculum or saved_plan(out)
                 notes = [f"{out} has no checkpoint yet (the run stopped before its first one): starting it over"]
                 return cls._begin(plan, out, device, observer, lock, notes)
-            directory, (trainer, extra), notes = _newest_whole(out, candidates, lambda d: Trainer.load(d, device))
+            directory, (trainer, extra), notes = newest_whole(out, candidates, lambda d: Trainer.load(d, device))
             try:
-                saved = _restore_files(out, directory, extra, notes)
+                saved = restore_files(out, directory, extra, notes)
                 if curriculum is not None:
                     changes = diff_curricula(saved, curriculum, f"{out / CONFIG} (the run's)", "the curriculum given now")
                     if changes:
@@ -353,42 +245,17 @@ class CurriculumRun:
         self._tensorboard.mark(trainer.progress.env_steps)
 
     def _test(self, result: StageResult) -> None:
-        """The stage's last and best agents on its held-out test episodes, read back from their
-        checkpoints; the final agent of the run also with a blank and another object's sentence, and the last
-        stage's agents on the correction test, sized like the test (``CorrectionQuota.scaled``), and on each
-        generalisation split of the run's holdout, as many episodes as the test."""
+        """The stage's agents measured (:func:`lanrocli.train.testset.measure_stage`), ``test.json`` and
+        ``report.md`` written."""
         stage = self.curriculum.stages[result.index]
         folder = self.out / stage_folder(result.index, stage.name)
-        episodes = self.curriculum.test.episodes
-        device = self.trainer.device
-        agents = [name for name in (LAST, BEST) if (folder / name).is_file()]
-        tested = _once_per_agent(folder, agents, lambda path: measure(path, episodes, device))
-        record: dict[str, Any] = _records(tested)
-        figures = {name: measurement.report.metrics() for name, measurement in tested.items()}
-        if self.state.finished and result is self.state.results[-1]:
-            plain = {"correction_rate": 0.0}
-            language = {
-                shown.value: measure(folder / LAST, episodes, device, plain, instruction=shown) for shown in Instruction
-            }
-            record[LANGUAGE] = _records(language)
-            quota = CORRECTION_QUOTA.scaled(episodes)
-            corrections = _once_per_agent(folder, agents, lambda path: correction_test(path, quota, device))
-            record[CORRECTION_TEST] = _records(corrections)
-            measured = {LANGUAGE: language, CORRECTION_TEST: corrections}
-            splits = self.trainer.settings.holdout.splits
-            if splits:
-                split_tests = {split.value: self._split_test(folder, agents, split) for split in splits}
-                record[SPLITS] = {split: _records(by_agent) for split, by_agent in split_tests.items()}
-                measured |= {f"{SPLITS}/{split}": by_agent for split, by_agent in split_tests.items()}
-            for kind, by_name in measured.items():
-                figures |= {f"{kind}/{name}": measurement.report.metrics() for name, measurement in by_name.items()}
+        final = self.state.finished and result is self.state.results[-1]
+        record, figures = measure_stage(
+            folder, self.curriculum.test.episodes, self.trainer.device, final, self.trainer.settings.holdout.splits
+        )
         write_json(folder / TEST, record)
         write_report(self.out, self.curriculum, self.state)
         self._tensorboard.test(result.end, figures)
-
-    def _split_test(self, folder: Path, agents: list[str], split: Split) -> dict[str, Measurement]:
-        episodes, device = self.curriculum.test.episodes, self.trainer.device
-        return _once_per_agent(folder, agents, lambda path: split_test(path, split, episodes, device))
 
     def complete_tests(self) -> None:
         """Measure stages that ended but were not measured yet: a run killed while testing does it on resume."""
@@ -458,90 +325,3 @@ def _train_settings(curriculum: Curriculum) -> TrainSettings:
         stage=0,
         holdout=curriculum.holdout.settings(),
     )
-
-
-def _saved_plan(out: Path) -> Curriculum:
-    """The curriculum a run without a checkpoint was started with, to start it over."""
-    try:
-        return load_curriculum(out / CONFIG)
-    except (CurriculumError, OSError):
-        raise RunError(
-            f"{out} holds no checkpoint and no readable {CONFIG}: start it again with the curriculum file, "
-            f"'lanro train CURRICULUM --out {out}' (what is there is replaced, as nothing was trained yet)"
-        ) from None
-
-
-def _newest_whole(out: Path, candidates: list[Path], load: Callable[[Path], Loaded]) -> tuple[Path, Loaded, list[str]]:
-    """The checkpoint to resume from, loaded: the one ``latest`` names when it is whole, else the newest
-    whole one, whose checkpoints written later are then set aside. Raises ``RunError`` when none is whole."""
-    problems: list[str] = []
-    try:
-        named = read_pointer(out / LATEST)
-        if named.is_dir():
-            candidates = [named, *(c for c in candidates if c != named)]
-        else:
-            problems.append(f"{out / LATEST} names {named.relative_to(out)}, which does not exist")
-    except CheckpointError as error:
-        problems.append(str(error))
-    newest = max((checkpoint_steps(c) or 0 for c in candidates), default=0)
-    for directory in candidates:
-        try:
-            loaded = load(directory)
-        except CheckpointError as error:
-            problems.append(str(error))
-            continue
-        notes = [f"damaged: {problem}" for problem in problems]
-        steps = checkpoint_steps(directory) or 0
-        if problems:
-            notes.append(
-                f"resuming from the newest whole checkpoint, {directory.parent.name}/{directory.name}: "
-                f"{newest - steps:,} environment steps will be trained again"
-            )
-        moved = set_aside(out, steps)
-        if moved:
-            notes.append(f"{len(moved)} checkpoint(s) written after it were moved to {out / SET_ASIDE}; delete them when done")
-        if problems or moved:
-            repoint(out, directory)
-        return directory, loaded, notes
-    listed = "\n".join(f"  {problem}" for problem in problems)
-    raise RunError(
-        f"{out} holds no whole checkpoint to resume from:\n{listed}\n"
-        f"Start a new run with another --out, or delete {out} and start again."
-    )
-
-
-@contextmanager
-def _released_on_error(lock: RunLock) -> Iterator[None]:
-    """Hold ``lock`` beyond the block only if it succeeds: a run that fails to open lets the folder go."""
-    try:
-        yield
-    except BaseException:
-        lock.release()
-        raise
-
-
-def _restore_files(out: Path, directory: Path, extra: dict[str, Any], notes: list[str]) -> Curriculum:
-    """Rewrite ``config.yaml`` and ``metrics.csv`` as the checkpoint at ``directory`` saw them (older
-    checkpoints hold no copies: their metrics are cut back to the checkpoint's steps), and return the run's
-    curriculum."""
-    copies = extra.get("files", {})
-    if CONFIG in copies:
-        config = out / CONFIG
-        current = config.read_text() if config.is_file() else None
-        if current != copies[CONFIG]:
-            notes.append(f"{config} was {'changed' if current is not None else 'missing'}: restored from the checkpoint")
-            write_text(config, copies[CONFIG])
-    if METRICS in copies:
-        write_text(out / METRICS, copies[METRICS])
-    else:
-        truncate_metrics(out / METRICS, checkpoint_steps(directory) or 0)
-    gained = align_metrics(out / METRICS)
-    if gained:
-        notes.append(
-            f"{out / METRICS} was written by an older version: rewritten with {len(gained)} new column(s) "
-            f"({', '.join(gained)}), empty in its earlier rows"
-        )
-    try:
-        return load_curriculum(out / CONFIG)
-    except (CurriculumError, OSError) as error:
-        raise RunError(f"{out} holds no readable {CONFIG} and its checkpoint no copy of it: {error}") from None

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +26,7 @@ from lanrocli.envs.evaluation import EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.language.vocabulary import unknown_words
 from lanrocli.train.checkpoint import resolve_checkpoint
+from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, SPLITS
 from lanrocli.train.seeds import correction_test_seed, held_out_seed, split_test_seed
 from lanrocli.train.trainer import AgentPolicy, TrainSettings, load_policy
 
@@ -242,3 +243,66 @@ def split_test(
     report = _run(loaded, episodes, first, progress=progress)
     record = {**_record(loaded, {"split": split.value, "first_seed": first}, Instruction.TRUE, report), "split": split.value}
     return Measurement(loaded.settings, loaded.env, first, True, report, record)
+
+
+# -- a stage's agents --------------------------------------------------------------------------------------
+
+
+def measure_stage(
+    folder: Path, episodes: int, device: str | torch.device, final: bool, splits: tuple[Split, ...]
+) -> tuple[dict[str, Any], dict[str, dict[str, float | int | None]]]:
+    """The ``test.json`` record of the stage in ``folder`` and its figures by agent: its last and best agents
+    on its held-out test episodes, read back from their checkpoints. The run's ``final`` stage also has its
+    last agent read a blank and another object's sentence, its agents on the correction test, sized like the
+    test (``CorrectionQuota.scaled``), and on each generalisation split in ``splits``, as many episodes as
+    the test."""
+    agents = [name for name in (LAST, BEST) if (folder / name).is_file()]
+    tested = once_per_agent(folder, agents, lambda path: measure(path, episodes, device))
+    record: dict[str, Any] = records(tested)
+    figures = {name: measurement.report.metrics() for name, measurement in tested.items()}
+    if final:
+        plain = {"correction_rate": 0.0}
+        language = {
+            shown.value: measure(folder / LAST, episodes, device, plain, instruction=shown) for shown in Instruction
+        }
+        record[LANGUAGE] = records(language)
+        quota = CORRECTION_QUOTA.scaled(episodes)
+        corrections = once_per_agent(folder, agents, lambda path: correction_test(path, quota, device))
+        record[CORRECTION_TEST] = records(corrections)
+        measured = {LANGUAGE: language, CORRECTION_TEST: corrections}
+        if splits:
+            split_tests = {split.value: _split_tests(folder, agents, split, episodes, device) for split in splits}
+            record[SPLITS] = {split: records(by_agent) for split, by_agent in split_tests.items()}
+            measured |= {f"{SPLITS}/{split}": by_agent for split, by_agent in split_tests.items()}
+        for kind, by_name in measured.items():
+            figures |= {f"{kind}/{name}": measurement.report.metrics() for name, measurement in by_name.items()}
+    return record, figures
+
+
+def _split_tests(
+    folder: Path, agents: list[str], split: Split, episodes: int, device: str | torch.device
+) -> dict[str, Measurement]:
+    return once_per_agent(folder, agents, lambda path: split_test(path, split, episodes, device))
+
+
+def once_per_agent(
+    folder: Path, names: list[str], measured: Callable[[Path], Measurement]
+) -> dict[str, Measurement]:
+    """``measured`` of each pointer of ``names`` in a stage's ``folder``, measured once per agent: ``best``
+    taken at the stage's last evaluation is the ``last`` agent (the same step, the same weights), and its
+    measurement is the other's, its record under its own checkpoint name."""
+    measurements: dict[str, Measurement] = {}
+    by_step: dict[str, Measurement] = {}
+    for name in names:
+        directory = resolve_checkpoint(folder / name)
+        step = directory.name.rsplit("-", 1)[-1]
+        if step not in by_step:
+            by_step[step] = measured(directory)
+        found = by_step[step]
+        record = {**found.record, "checkpoint": checkpoint_name(directory)}
+        measurements[name] = replace(found, record=record)
+    return measurements
+
+
+def records(measurements: dict[str, Measurement]) -> dict[str, dict[str, Any]]:
+    return {name: measurement.record for name, measurement in measurements.items()}

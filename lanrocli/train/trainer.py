@@ -33,7 +33,7 @@ from lanrocli.language import Vocabulary, agent_vocabulary, grammar_vocabulary
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.train.checkpoint import Checkpoint, load_checkpoint, resolve_checkpoint, save_checkpoint
 from lanrocli.train.collect import Collector
-from lanrocli.train.runfolder import CheckpointError
+from lanrocli.train.errors import CheckpointError
 
 SUCCESS_WINDOW = 100
 """Training episodes over which the reported training success is averaged."""

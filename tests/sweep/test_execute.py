@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 
 from lanrocli.sweep.execute import Resources, _summary
-from lanrocli.train.runfolder import RunError
+from lanrocli.train.errors import RunError
 
 
 def test_a_trial_takes_a_cpu_per_environment_worker_and_one_for_its_learner() -> None:

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 from typing import NamedTuple
 
-from lanrocli.train.pipeline import RunState
+from lanrocli.train.runstate import RunState
 from lanrocli.train.runfolder import LATEST, METRICS, read_pointer
 
 TINY = """\

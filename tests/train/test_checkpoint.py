@@ -15,7 +15,6 @@ from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.language import COLOURS, SHAPES, ObjectProps, grammar_vocabulary
 from lanrocli.train.checkpoint import (
     AGENT_FILE,
-    MANIFEST_FILE,
     STATE_FILE,
     Checkpoint,
     load_checkpoint,
@@ -23,7 +22,8 @@ from lanrocli.train.checkpoint import (
     state_from_json,
     state_to_json,
 )
-from lanrocli.train.runfolder import CheckpointError
+from lanrocli.train.errors import CheckpointError
+from lanrocli.train.manifest import MANIFEST_FILE
 from lanrocli.train.trainer import Trainer, TrainSettings, load_policy
 
 VOCABULARY = grammar_vocabulary()

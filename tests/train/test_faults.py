@@ -21,11 +21,14 @@ import pytest
 from typer.testing import CliRunner
 
 from lanrocli.cli import app
-from lanrocli.train import checkpoint, runfolder
+from lanrocli.train import checkpoint
+from lanrocli.train import writing as runfolder
 from lanrocli.train.checkpoint import AGENT_FILE, BUFFER_FILE, STATE_FILE
 from lanrocli.train.curriculum import load_curriculum
-from lanrocli.train.pipeline import CurriculumRun, RunError
-from lanrocli.train.runfolder import CONFIG, LATEST, METRICS, SET_ASIDE, TMP_PREFIX, RunLock, read_pointer
+from lanrocli.train.errors import RunError
+from lanrocli.train.pipeline import CurriculumRun
+from lanrocli.train.runfolder import CONFIG, LATEST, METRICS, SET_ASIDE, read_pointer
+from lanrocli.train.writing import TMP_PREFIX, RunLock
 
 from .runs import Baseline, finish, lanro, outcome, rows, tiny, train, wait_for_rows, wait_until
 from .test_yamlfile import ALIAS_BOMB
@@ -115,7 +118,7 @@ def test_a_second_writer_is_refused_naming_the_first_and_a_dead_one_leaves_no_lo
     lock.release()
     RunLock(out).release()
 
-    code = f"from pathlib import Path; from lanrocli.train.runfolder import RunLock; lock = RunLock(Path({str(out)!r})); print('held', flush=True); input()"
+    code = f"from pathlib import Path; from lanrocli.train.writing import RunLock; lock = RunLock(Path({str(out)!r})); print('held', flush=True); input()"
     holder = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
     with pytest.raises(RunError, match=f"in use: process {holder.pid}"):

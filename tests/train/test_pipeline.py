@@ -16,7 +16,9 @@ from lanrocli.envs.figures import EpisodeResult, wilson_interval
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.checkpoint import AGENT_FILE, resolve_checkpoint
 from lanrocli.train.curriculum import Curriculum, load_curriculum
-from lanrocli.train.pipeline import CurriculumRun, RunError, _once_per_agent, _records, _restore_files
+from lanrocli.train.errors import RunError
+from lanrocli.train.pipeline import CurriculumRun
+from lanrocli.train.recovery import restore_files as _restore_files
 from lanrocli.train.runfolder import (
     CONFIG,
     CORRECTION_TEST,
@@ -31,6 +33,8 @@ from lanrocli.train.runfolder import (
 )
 from lanrocli.train.seeds import correction_test_seed, evaluation_seed, held_out_seed, split_test_seed
 from lanrocli.train.testset import CORRECTION_QUOTA, Measurement, correction_test, split_test
+from lanrocli.train.testset import once_per_agent as _once_per_agent
+from lanrocli.train.testset import records as _records
 from lanrocli.train.trainer import TrainSettings
 
 from .runs import Baseline, outcome, rows, scalars, tiny, train, wait_for_rows

@@ -14,12 +14,12 @@ from lanrocli.train.runfolder import (
     METRICS,
     align_metrics,
     append_metrics,
-    correction_test_lines,
     publish,
     read_pointer,
     truncate_metrics,
-    write_json,
 )
+from lanrocli.train.runreport import correction_test_lines
+from lanrocli.train.writing import write_json
 
 
 def test_publishing_points_at_the_new_checkpoints_and_prunes_all_but_the_one_before(tmp_path: Path) -> None:

@@ -17,7 +17,8 @@ import torch
 from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.checkpoint import AGENT_FILE, load_agent_state
-from lanrocli.train.runfolder import LATEST, CheckpointError, read_pointer
+from lanrocli.train.errors import CheckpointError
+from lanrocli.train.runfolder import LATEST, read_pointer
 from lanrocli.train.trainer import Trainer, TrainSettings, pick_device, updates_due
 
 SETTINGS = TrainSettings(

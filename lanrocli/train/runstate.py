@@ -1,0 +1,76 @@
+"""Where a run is in its curriculum, saved in every checkpoint, and the promotion rule that moves it on."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from lanrocli.envs.evaluation import EvaluationReport
+from lanrocli.envs.figures import Rate, wilson_interval
+from lanrocli.train.curriculum import Promote, Stage
+
+
+@dataclass
+class StageResult:
+    """How a finished stage went; the rows of ``report.md``."""
+
+    index: int
+    name: str
+    start: int
+    end: int
+    ended: str
+    """``promoted`` when the rule held, ``budget`` when the budget ran out first."""
+    evaluations: int
+    rule_value: float | None
+    """What the promotion rule saw at the stage's last evaluation (pooled); None without a rule."""
+    wall_time: float
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> StageResult:
+        return cls(**{f.name: data.get(f.name) for f in dataclasses.fields(cls)})
+
+
+@dataclass
+class RunState:
+    """Where the run is in its curriculum; saved in every checkpoint beside the trainer's own state."""
+
+    stage: int = 0
+    stage_start: int = 0
+    evaluations: int = 0
+    """Evaluations so far in the current stage."""
+    window: list[tuple[int, int]] = field(default_factory=list)
+    """(successes, episodes) on what the rule watches, for the stage's last ``patience`` evaluations."""
+    best: float | None = None
+    """Best success so far in this stage on one evaluation, on what its rule watches (overall without a
+    rule); -1 while no evaluation had such episodes."""
+    finished: bool = False
+    stopped_early: bool = False
+    """The run ended at a stage whose budget ran out with ``on_budget: stop``."""
+    results: list[StageResult] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> RunState:
+        known = {f.name for f in dataclasses.fields(cls)}
+        results = [StageResult.from_dict(r) for r in data.get("results", [])]
+        window = [(int(k), int(n)) for k, n in data.get("window", [])]
+        return cls(**{**{k: v for k, v in data.items() if k in known}, "results": results, "window": window})
+
+
+
+def watched(stage: Stage, report: EvaluationReport) -> Rate:
+    """The episodes the stage's rule watches (all of them without a rule)."""
+    return report.corrected if stage.promote is not None and stage.promote.on == "corrected" else report.overall
+
+
+def pooled_rule(promote: Promote, window: list[tuple[int, int]]) -> tuple[float | None, bool]:
+    """The rule's value on the pooled episodes of ``window`` and whether it holds: only once ``patience``
+    evaluations are pooled, so a stage is never promoted on fewer episodes than its rule asks for."""
+    successes, episodes = sum(k for k, _ in window), sum(n for _, n in window)
+    if episodes == 0:
+        return None, False
+    value = successes / episodes if promote.statistic == "mean" else wilson_interval(successes, episodes)[0]
+    return value, len(window) >= promote.patience and value >= promote.success
