@@ -34,7 +34,7 @@ from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE
 from lanrocli.language import COLOURS, SHAPES, ObjectProps, grammar_vocabulary
-from lanrocli.train.curriculum import AgentConfig
+from lanrocli.train.sections import AgentConfig
 
 from learning import AGENT, agent_overrides  # this directory's learning benchmark: same agent, same --agent parsing
 

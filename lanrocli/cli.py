@@ -473,7 +473,8 @@ def _measure_checkpoint(path: Path, task: Task | None, device: str | None, run: 
 def _test_episodes(path: Path) -> int:
     """The test-set size of the run that ``path`` belongs to, so ``lanro eval`` repeats what report.md quotes."""
     from lanrocli.train.checkpoint import resolve_checkpoint
-    from lanrocli.train.curriculum import Curriculum, CurriculumError, HeldOutConfig, load_curriculum
+    from lanrocli.train.curriculum import Curriculum, CurriculumError, load_curriculum
+    from lanrocli.train.sections import HeldOutConfig
     from lanrocli.train.runfolder import CONFIG
 
     config = resolve_checkpoint(path).parent.parent / CONFIG
@@ -886,7 +887,8 @@ def report_command(
     bootstrap interval, and the interquartile mean from five runs on; a kind or form some run heard too few
     times to judge is marked *. Runs that differ in their settings are grouped and compared side by side.
     """
-    from lanrocli.sweep.report import ReportError, make_report, to_json, to_markdown
+    from lanrocli.sweep.report import ReportError, make_report
+    from lanrocli.sweep.report_output import to_json, to_markdown
 
     if agent not in ("last", "best"):
         raise fail("--agent is last or best")

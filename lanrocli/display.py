@@ -16,9 +16,9 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 from lanrocli.stop import StopRequest
-from lanrocli.train.curriculum import Stage
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
 from lanrocli.train.runstate import StageResult
+from lanrocli.train.sections import Stage
 
 __all__ = ["StopRequest", "TrainingDisplay"]
 

@@ -25,7 +25,7 @@ from typing import Any
 import torch
 
 from lanrocli.envs.evaluation import EvaluationReport
-from lanrocli.train.curriculum import Curriculum, Stage, diff_curricula
+from lanrocli.train.curriculum import Curriculum, diff_curricula
 from lanrocli.train.errors import RunError
 from lanrocli.train.recovery import (
     clear_leftovers,
@@ -50,6 +50,7 @@ from lanrocli.train.runfolder import (
 )
 from lanrocli.train.runreport import write_report
 from lanrocli.train.runstate import RunState, StageResult, pooled_rule, watched
+from lanrocli.train.sections import Stage
 from lanrocli.train.seeds import evaluation_seed
 from lanrocli.train.tensorboard import TensorBoard
 from lanrocli.train.testset import measure_stage

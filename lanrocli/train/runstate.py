@@ -8,7 +8,7 @@ from typing import Any
 
 from lanrocli.envs.evaluation import EvaluationReport
 from lanrocli.envs.figures import Rate, wilson_interval
-from lanrocli.train.curriculum import Promote, Stage
+from lanrocli.train.sections import Promote, Stage
 
 
 @dataclass

@@ -15,7 +15,8 @@ from typer.testing import CliRunner
 from lanrocli.cli import app
 from lanrocli.sweep.groups import group_runs
 from lanrocli.sweep.plan import SWEEP_FILE, SweepSpec
-from lanrocli.sweep.report import ReportError, make_report, to_json, to_markdown
+from lanrocli.sweep.report import ReportError, make_report
+from lanrocli.sweep.report_output import to_json, to_markdown
 from lanrocli.train.curriculum import load_curriculum
 from lanrocli.train.runfolder import CONFIG, LATEST, REPORT, TEST
 from train.runs import tiny

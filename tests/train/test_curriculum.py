@@ -17,7 +17,6 @@ from lanrocli.train.curriculum import (
     QUICK_TEST_EPISODES,
     Curriculum,
     CurriculumError,
-    EnvConfig,
     Problem,
     builtin_curriculum,
     diff_curricula,
@@ -25,6 +24,7 @@ from lanrocli.train.curriculum import (
     load_curriculum,
     packaged_curricula,
 )
+from lanrocli.train.sections import EnvConfig
 
 MINIMAL = """\
 name: demo

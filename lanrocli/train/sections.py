@@ -1,0 +1,164 @@
+"""The sections of a curriculum file under its top level: a stage with its budget and promotion rule, the
+evaluation, the test and the holdout; and the ``agent``, ``buffer`` and ``env`` sections, generated from the
+dataclasses that own those settings (``SACSettings``, ``BufferSettings``, ``EnvSettings``), so a new setting
+of either needs no change here. :mod:`lanrocli.train.curriculum` puts them together and checks them
+against each other. Like it, this loads neither torch nor pybullet."""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+import warnings
+from typing import Any, ClassVar, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, create_model, field_validator, model_validator
+
+from lanrocli.agent.settings import BufferSettings, SACSettings
+from lanrocli.envs.settings import EnvSettings
+from lanrocli.language.holdout import Holdout
+
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
+"""Curriculum and stage names become folder names: no separators, no leading dot."""
+
+
+class _Settings(BaseModel):
+    """A section generated from a settings dataclass, one optional key per field, checked by the dataclass."""
+
+    model_config = ConfigDict(extra="forbid")
+    settings_class: ClassVar[type]
+
+    @model_validator(mode="after")
+    def _settings_accept(self) -> _Settings:
+        self.settings()
+        return self
+
+    def settings(self) -> Any:
+        return self.settings_class(**{name: getattr(self, name) for name in type(self).model_fields})
+
+
+class _KeyByKey(_Settings):
+    """A section whose dataclass checks each key alone (the others at their defaults) before all of them
+    together, so that a problem with one setting is reported at its own key and line. The environment's
+    checks are per setting; the agent's are reported at the section, as some of them name several keys."""
+
+    @field_validator("*")
+    @classmethod
+    def _key_accepted(cls, value: Any, info: ValidationInfo) -> Any:
+        cls.settings_class(**{info.field_name: value})
+        return value
+
+
+def _section(settings_class: type, name: str, base: type[_Settings]) -> type[_Settings]:
+    hints = typing.get_type_hints(settings_class)
+    fields = {f.name: (hints[f.name], f.default) for f in dataclasses.fields(settings_class)}
+    model = create_model(name, __base__=base, __module__=__name__, **fields)  # type: ignore[call-overload]
+    model.settings_class = settings_class
+    model.__doc__ = f"One optional key per field of ``{settings_class.__name__}``, generated from it."
+    return model
+
+
+AgentConfig = _section(SACSettings, "AgentConfig", _Settings)
+BufferConfig = _section(BufferSettings, "BufferConfig", _KeyByKey)
+EnvConfig = _section(EnvSettings, "EnvConfig", _KeyByKey)
+
+
+class Budget(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    steps: int = Field(gt=0)
+    """Environment steps, summed over the parallel environments."""
+
+
+class Promote(BaseModel):
+    """When the agent has mastered a stage: the success rate on the episodes of its last ``patience``
+    evaluations, pooled, is at least ``success``. Pooling judges a rule on patience x episodes fresh episodes
+    at once, so one lucky evaluation neither ends a stage nor, with ``statistic: lower_bound``, does a
+    rate that the pooled episodes cannot tell apart from a lower one."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    success: float = Field(ge=0.0, le=1.0)
+    on: Literal["overall", "corrected"] = "overall"
+    """``corrected``: the success rate of episodes in which the instructor spoke a correction."""
+    patience: int = Field(1, ge=1)
+    statistic: Literal["mean", "lower_bound"] = "mean"
+    """``mean``: the pooled success rate; ``lower_bound``: the lower end of its 95% Wilson interval."""
+
+    @field_validator("on", mode="before")
+    @classmethod
+    def _renamed(cls, on: Any) -> Any:
+        if on == "corrections":
+            warnings.warn(
+                "promote.on: 'corrections' is deprecated and read as 'corrected' (the success of episodes in which "
+                "a correction was spoken); write 'on: corrected'",
+                FutureWarning,
+                stacklevel=2,
+            )
+            return "corrected"
+        return on
+
+
+class Stage(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(pattern=NAME_PATTERN)
+    env: EnvConfig = Field(default_factory=EnvConfig)
+    budget: Budget
+    promote: Promote | None = None
+    """``None``: the stage runs its whole budget."""
+    on_budget: Literal["advance", "stop"] = "advance"
+    """What to do when the budget runs out before promotion: go on regardless, or end the curriculum."""
+
+    @field_validator("promote")
+    @classmethod
+    def _corrections_exist(cls, promote: Promote | None, info: ValidationInfo) -> Promote | None:
+        env = info.data.get("env")  # absent when the env itself failed validation
+        if promote is not None and promote.on == "corrected" and env is not None and env.correction_rate == 0:
+            raise ValueError(
+                "promote on 'corrected' needs env.correction_rate > 0: without corrections there is no "
+                "success rate on corrections to measure"
+            )
+        return promote
+
+
+class EvalConfig(BaseModel):
+    """Evaluations during a stage: they drive promotion and pick ``best``, each on fresh episodes."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    every: int = Field(10_000, gt=0)
+    """Environment steps between evaluations."""
+    episodes: int = Field(100, gt=0)
+
+
+class HeldOutConfig(BaseModel):
+    """The held-out test episodes on which each stage's ``last`` and ``best`` agents are measured."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    episodes: int = Field(500, gt=0)
+
+
+class HoldoutConfig(BaseModel):
+    """What training never shows, tested at the end of the last stage: one generalisation split per key
+    given (``Holdout`` has the rules; docs/generalisation.md the reasons)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    pairs: list[str] = []
+    """Colour-shape pairs ("red cylinder") never on the table in training; the split's goal is one."""
+    correction_words: list[str] = []
+    """One shape word per shape, never inside a correction in training; the split's corrections use them."""
+    late_corrections: tuple[int, int] | None = None
+    """[first, last]: the delays of the split's corrections, all longer than any stage's max_delay."""
+    common_ground: list[str] = []
+    """Rare colour words never heard in training; the split's common-ground instructions use them."""
+
+    @field_validator("*")
+    @classmethod
+    def _key_accepted(cls, value: Any, info: ValidationInfo) -> Any:
+        Holdout.from_dict({info.field_name: value})
+        return value
+
+    def settings(self) -> Holdout:
+        return Holdout.from_dict(self.model_dump())
