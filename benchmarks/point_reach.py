@@ -28,7 +28,8 @@ import numpy as np
 import torch
 from pydantic import ValidationError
 
-from lanrocli.agent.buffer import EpisodeData, ReplayBuffer
+from lanrocli.agent.buffer import ReplayBuffer
+from lanrocli.agent.transitions import EpisodeData
 from lanrocli.agent.networks import ObjectLayout
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings

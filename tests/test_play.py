@@ -13,7 +13,8 @@ from typer.testing import CliRunner
 from lanrocli.cli import app
 from lanrocli.envs.caption import BAND
 from lanrocli.language import ObjectProps, grammar_vocabulary
-from lanrocli.play import Grammar, PlayError, Utterance, check_display, unknown_words, words_of
+from lanrocli.language.typed import Grammar, Utterance, unknown_words, words_of
+from lanrocli.play import PlayError, check_display
 
 runner = CliRunner()
 

@@ -15,119 +15,20 @@ Sampling then needs only vectorised indexing.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from lanrocli.agent.relabel import sentence_pool
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
-from lanrocli.language import TASKS, ObjectProps, Vocabulary, check_task, grammar_vocabulary
-from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
-
-NO_OBJECT = np.iinfo(np.uint8).max
-"""Property index stored for an object slot that the episode's scene leaves empty."""
-
-NEVER = np.iinfo(np.int32).max
-"""``first_achieved`` of an object the episode never achieved the task on."""
+from lanrocli.agent.sampling import sampled_batch
+from lanrocli.agent.transitions import NEVER, NO_OBJECT, Batch, EpisodeData, stored_arrays
+from lanrocli.language import TASKS, Vocabulary, check_task, grammar_vocabulary
 
 _FORMAT = 2
 """1: corrected sentences by target only, and no ``names_goal`` or ``first_achieved``; still read."""
 
 
-@dataclass
-class EpisodeData:
-    """One complete (or truncated) episode of T steps, as the training loop collected it.
-
-    ``instructions[t]`` is the goal sentence read with ``observations[t]`` and ``next_instructions[t]``
-    the one read with ``next_observations[t]``; they differ at the step a correction is spoken.
-    ``achieved[t, k]``: the task condition holds for object k after step t (the environment's
-    ``info["achieved"]``). ``terminated[t]``: step t ended the episode by success (not by the time limit).
-    ``objects`` are in observation order, as ``info["objects"]`` lists them.
-    """
-
-    observations: np.ndarray  # float32 [T, N]
-    next_observations: np.ndarray  # float32 [T, N]
-    instructions: np.ndarray  # int [T, L]
-    next_instructions: np.ndarray  # int [T, L]
-    actions: np.ndarray  # float32 [T, A]
-    rewards: np.ndarray  # float32 [T]
-    terminated: np.ndarray  # bool [T]
-    achieved: np.ndarray  # bool [T, n_objects]
-    goal_index: int
-    objects: tuple[ObjectProps, ...]
-    task: str
-    fell: np.ndarray | None = None  # bool [T]: step t ended the episode by dropping an object; None: never
-    correction_episode: bool = False
-    """Whether the instructor set this episode up for a correction: its instruction singles out the goal
-    only once the correction is spoken (the environment's ``info["challenge"]`` is not None)."""
-
-    def __len__(self) -> int:
-        return int(self.observations.shape[0])
-
-
-@dataclass
-class Batch:
-    """Sampled transitions. ``done``: the step ended by success. ``named``: for a relabelled transition the
-    object slot its new sentence singles out, -1 for the others. ``label``: the object slot the
-    transition's sentence singles out where that is known (``named``, and with ``ground_real`` sampling
-    the goal of a stored transition whose sentence names it), -1 elsewhere; the attention is taught on
-    it. ``failed``: with ``falls_fail`` sampling, the transition's last step dropped an object off the table
-    without winning, so the episode is lost for good (``done`` is then set too). ``slots``: where in the
-    buffer each transition is stored, to look up what the batch does not carry.
-
-    ``steps``: how many stored steps each transition spans. With n-step sampling ``reward`` is the return
-    discounted over those steps, ``next_obs`` and ``next_instruction`` are read after the last of them, and
-    the Bellman target discounts its bootstrap by ``gamma ** steps``."""
-
-    obs: np.ndarray  # float32 [B, N]
-    instruction: np.ndarray  # int64 [B, L]
-    action: np.ndarray  # float32 [B, A]
-    reward: np.ndarray  # float32 [B]
-    next_obs: np.ndarray  # float32 [B, N]
-    next_instruction: np.ndarray  # int64 [B, L]
-    done: np.ndarray  # bool [B]
-    named: np.ndarray  # int64 [B]
-    label: np.ndarray  # int64 [B]
-    failed: np.ndarray  # bool [B]
-    slots: np.ndarray  # int64 [B]
-    steps: np.ndarray  # int64 [B], 1 for one-step transitions
-
-    @property
-    def relabelled(self) -> np.ndarray:
-        """bool [B]: which transitions got a hindsight sentence."""
-        return self.named >= 0
-
-
-# The stored arrays: name -> (dtype, shape after the slot axis, in terms of the buffer's dimensions).
-def _layout(obs_dim: int, action_dim: int, max_objects: int, length: int) -> dict[str, tuple[type, tuple[int, ...]]]:
-    return {
-        "obs": (np.float32, (obs_dim,)),
-        "next_obs": (np.float32, (obs_dim,)),
-        "action": (np.float32, (action_dim,)),
-        "reward": (np.float32, ()),
-        "terminated": (np.bool_, ()),
-        "instruction": (np.uint8, (length,)),
-        "next_instruction": (np.uint8, (length,)),
-        "achieved": (np.bool_, (max_objects,)),
-        "fell": (np.bool_, ()),
-        "names_goal": (np.bool_, ()),  # the sentence read with obs singles out the goal
-        "first_achieved": (np.int32, (max_objects,)),  # the episode's first step achieving each object
-        "goal_index": (np.uint8, ()),
-        "objects": (np.uint8, (max_objects, 2)),
-        "task": (np.uint8, ()),
-        "episode_start": (np.int32, ()),
-        "episode_length": (np.int32, ()),
-        # Relabelling: the achieving steps of an episode are listed (as slots) in the episode's own slots;
-        # for step t, future_first/future_count select those at or after t.
-        "achieving_slot": (np.int32, ()),
-        "future_first": (np.int32, ()),
-        "future_count": (np.int32, ()),
-        "identifiable": (np.bool_, (max_objects,)),
-        "plain_pool": (np.uint8, (max_objects, length)),
-        "corrected_pool": (np.uint8, (max_objects, max_objects, length)),  # by target, touched object
-        "valid": (np.bool_, ()),
-    }
 
 
 class ReplayBuffer:
@@ -173,7 +74,7 @@ class ReplayBuffer:
         self.size = 0  # valid transitions
         self.episodes_added = 0
         self._relabelable: np.ndarray | None = None  # slots relabelling can turn into successes; None: stale
-        layout = _layout(obs_dim, action_dim, max_objects, vocabulary.max_length)
+        layout = stored_arrays(obs_dim, action_dim, max_objects, vocabulary.max_length)
         self.data: dict[str, np.ndarray] = {
             name: np.zeros((capacity, *shape), dtype=dtype) for name, (dtype, shape) in layout.items()
         }
@@ -323,116 +224,17 @@ class ReplayBuffer:
 
         With ``n_step`` above 1 each transition spans up to ``n_step`` stored steps of its episode (fewer where
         the episode ends first, or where its goal, the relabelled one included, is achieved first): see
-        :meth:`_extend`; ``gamma`` discounts the rewards along the way.
+        :mod:`lanrocli.agent.sampling`; ``gamma`` discounts the rewards along the way.
         """
         if self.size == 0:
             raise ValueError("cannot sample from an empty replay buffer")
         if n_step < 1:
             raise ValueError(f"n_step must be at least 1, got {n_step}")
-        d = self.data
         idx = self._draw(batch_size, rng, hindsight_share)
-        instruction = d["instruction"][idx].astype(np.int64)
-        next_instruction = d["next_instruction"][idx].astype(np.int64)
-        reward = d["reward"][idx]
-        done = d["terminated"][idx]
-
-        relabel = (d["future_count"][idx] > 0) & (rng.random(batch_size) < relabel_ratio)
-        named = np.full(batch_size, -1, dtype=np.int64)
-        target = np.zeros(0, dtype=np.int64)
-        rows = idx[relabel]
-        if rows.size:
-            step = d["achieving_slot"][d["future_first"][rows] + rng.integers(0, d["future_count"][rows])]
-            candidates = d["achieved"][step] & d["identifiable"][step]
-            if fresh_targets:
-                at_start = d["episode_start"][rows] == rows
-                candidates &= ~(d["achieved"][np.maximum(rows - 1, 0)] & ~at_start[:, None])
-            found = candidates.any(axis=1)
-            relabel[relabel] = found
-            rows, candidates = rows[found], candidates[found]
-        if rows.size:
-            target = np.argmax(np.where(candidates, rng.random(candidates.shape), -1.0), axis=1)
-            pool_row = d["episode_start"][rows] + rng.integers(0, np.minimum(d["episode_length"][rows], self.pool_rows))
-            touched, has_other = self._touched(rows, target, rng)
-            corrected = (rng.random(rows.size) < correction_share) & has_other
-            sentence = np.where(
-                corrected[:, None], d["corrected_pool"][pool_row, target, touched], d["plain_pool"][pool_row, target]
-            )
-            success = d["achieved"][rows, target]
-            instruction[relabel] = sentence
-            next_instruction[relabel] = sentence
-            reward[relabel] = np.where(success, SUCCESS_REWARD, FAILURE_REWARD)
-            done[relabel] = success
-            named[relabel] = target
-        label = named.copy()
-        if ground_real:
-            real = ~relabel & d["names_goal"][idx]
-            label[real] = d["goal_index"][idx[real]]
-
-        batch = Batch(
-            obs=d["obs"][idx],
-            instruction=instruction,
-            action=d["action"][idx],
-            reward=reward,
-            next_obs=d["next_obs"][idx],
-            next_instruction=next_instruction,
-            done=done,
-            named=named,
-            label=label,
-            failed=np.zeros(batch_size, dtype=bool),
-            slots=idx,
-            steps=np.ones(batch_size, dtype=np.int64),
+        return sampled_batch(
+            self.data, idx, rng, self.pool_rows, relabel_ratio, correction_share, n_step, gamma, fresh_targets,
+            ground_real, falls_fail,
         )
-        if n_step > 1:
-            self._extend(batch, relabel, target, n_step, gamma)
-        if falls_fail:
-            batch.failed = d["fell"][batch.slots + batch.steps - 1] & ~batch.done
-            batch.done = batch.done | batch.failed
-        return batch
-
-    def _touched(self, rows: np.ndarray, target: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """Per relabelled transition, the object other than its target that the arm achieved the task on
-        first in the episode, else a uniformly drawn other object; and whether the scene has another."""
-        first = self.data["first_achieved"][rows].copy()
-        first[np.arange(rows.size), target] = NEVER
-        present = self.data["objects"][rows, :, 0] != NO_OBJECT
-        n = present.sum(axis=1)
-        drawn = (target + 1 + rng.integers(0, np.maximum(n - 1, 1))) % np.maximum(n, 1)
-        touched = np.where(first.min(axis=1) < NEVER, np.argmin(first, axis=1), drawn)
-        return touched, n > 1
-
-    def _extend(self, batch: Batch, relabel: np.ndarray, target: np.ndarray, n_step: int, gamma: float) -> None:
-        """Turn one-step transitions into n-step ones, in place.
-
-        A transition at step t spans steps t..t+k-1, where k is ``n_step``, cut short at the episode's last
-        step and at the first step that achieves its goal (which then ends it as done). A stored transition
-        keeps the goal the episode gave it step by step, so the rewards after a correction are those of the
-        corrected goal, as the one-step target's bootstrap already reads the corrected sentence; a relabelled
-        one keeps its sentence, and its rewards and done flags are recomputed from the stored ``achieved``
-        flags of the object it names, as for one step. The return sums the rewards discounted by ``gamma``;
-        the later steps' entropy bonus is left out, as is usual for n-step SAC.
-        """
-        d = self.data
-        slots = batch.slots
-        last = d["episode_start"][slots] + d["episode_length"][slots] - 1
-        offsets = np.arange(n_step)
-        window = np.minimum(slots[:, None] + offsets, last[:, None])  # [B, n], repeats the last step past the end
-        inside = slots[:, None] + offsets <= last[:, None]
-        reward = d["reward"][window].astype(np.float64)
-        achieved = d["terminated"][window].copy()
-        if target.size:
-            hit = d["achieved"][window[relabel], target[:, None]]
-            achieved[relabel] = hit
-            reward[relabel] = np.where(hit, SUCCESS_REWARD, FAILURE_REWARD)
-        ends = achieved & inside
-        done = ends.any(axis=1)
-        steps = np.where(done, np.argmax(ends, axis=1) + 1, inside.sum(axis=1))
-        counted = offsets[None, :] < steps[:, None]
-        batch.reward = (np.where(counted, reward * gamma**offsets, 0.0).sum(axis=1)).astype(np.float32)
-        batch.done = done
-        batch.steps = steps.astype(np.int64)
-        final = slots + steps - 1
-        batch.next_obs = d["next_obs"][final]
-        batch.next_instruction[~relabel] = d["next_instruction"][final[~relabel]].astype(np.int64)
 
     def _draw(self, batch_size: int, rng: np.random.Generator, hindsight_share: float) -> np.ndarray:
         if hindsight_share == 0.0:

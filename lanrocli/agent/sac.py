@@ -15,7 +15,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lanrocli.agent.buffer import Batch, ReplayBuffer
+from lanrocli.agent.buffer import ReplayBuffer
+from lanrocli.agent.transitions import Batch
 from lanrocli.agent.encoder import LanguageEncoder, encode
 from lanrocli.agent.networks import Actor, Critic, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer

@@ -23,7 +23,7 @@ import numpy as np
 from gymnasium.utils import seeding
 from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
 
-from lanrocli.agent.buffer import EpisodeData
+from lanrocli.agent.transitions import EpisodeData
 from lanrocli.envs.env import LanroEnv
 from lanrocli.language import ObjectProps
 from lanrocli.train.checkpoint import state_from_json, state_to_json

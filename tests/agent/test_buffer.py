@@ -10,7 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lanrocli.agent.buffer import Batch, EpisodeData, ReplayBuffer
+from lanrocli.agent.buffer import ReplayBuffer
+from lanrocli.agent.transitions import Batch, EpisodeData
 from lanrocli.choices import CorrectionForm
 
 from .episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode

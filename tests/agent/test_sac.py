@@ -11,7 +11,8 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from lanrocli.agent.buffer import Batch, ReplayBuffer
+from lanrocli.agent.buffer import ReplayBuffer
+from lanrocli.agent.transitions import Batch
 from lanrocli.agent.networks import ObjectLayout
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings, SACSettings
