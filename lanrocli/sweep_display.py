@@ -4,14 +4,16 @@ a trial (it starts, evaluates, ends a stage, ends) and a progress line per runni
 
 from __future__ import annotations
 
+import shlex
 import time
+from pathlib import Path
 
 from rich.console import Console
 from rich.live import Live
 from rich.markup import escape
 from rich.table import Table
 
-from lanrocli.sweep.protocol import FAILED, FINISHED, RUNNING, STOPPED, SweepObserver, TrialProgress
+from lanrocli.sweep.protocol import ENDED_BEFORE, FAILED, FINISHED, RUNNING, STOPPED, SweepObserver, TrialProgress
 
 PLAIN_INTERVAL = 60.0
 """Seconds between a running trial's progress lines when the output is not a terminal."""
@@ -80,3 +82,23 @@ class SweepDisplay(SweepObserver):
 
     def note(self, message: str) -> None:
         (self._live.console if self._live is not None else self.console).print(escape(message))
+
+
+def resume_command(out: Path) -> str:
+    return f"lanro sweep --out {shlex.quote(str(out))} --resume"
+
+
+def print_outcome(console: Console, statuses: dict[str, str], errors: dict[str, str], out: Path) -> int:
+    """What became of the trials, and what to run next; returns the exit code: 0 when every trial has ended,
+    1 when one failed, 130 when the others were stopped or never started."""
+    for name, error in errors.items():
+        console.print(f"[bold red]trial {escape(name)} failed:[/] {escape(error)}", highlight=False)
+    done = sum(status in (FINISHED, ENDED_BEFORE) for status in statuses.values())
+    console.print(f"{done} of {len(statuses)} trials finished; sweep folder: {out}", highlight=False)
+    if done < len(statuses):
+        stopped = any(status == STOPPED for status in statuses.values())
+        console.print(f"{'stopped; ' if stopped else ''}resume with: {resume_command(out)}", markup=False, highlight=False)
+        return 1 if any(status == FAILED for status in statuses.values()) else 130
+    folder = shlex.quote(str(out))
+    console.print(f"next: lanro report {folder}   lanro plot {folder} --out curves.png", markup=False, highlight=False)
+    return 0

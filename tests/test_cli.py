@@ -259,7 +259,7 @@ def test_every_shipped_curriculum_checks(tmp_path) -> None:
 
 
 def test_quick_without_a_file_runs_quick_yaml_as_written_and_with_a_file_scales_it() -> None:
-    from lanrocli.cli import _load_plan
+    from lanrocli.arguments import load_plan as _load_plan
     from lanrocli.train.curriculum import builtin_curriculum, load_curriculum
 
     written = load_curriculum(QUICK)

@@ -16,15 +16,14 @@ import torch.nn.functional as F
 from torch import nn
 
 from lanrocli.agent.buffer import ReplayBuffer
-from lanrocli.agent.transitions import Batch
 from lanrocli.agent.encoder import LanguageEncoder, encode
 from lanrocli.agent.networks import Actor, Critic, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
-from lanrocli.agent.settings import BufferSettings, SACSettings
+from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
+from lanrocli.agent.transitions import Batch
 from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 
 _FORMAT = 1
-_UPDATE_METRICS = ("critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy")
 
 logger = logging.getLogger(__name__)
 
@@ -219,7 +218,7 @@ class SACAgent:
         with torch.no_grad():
             losses = [critic_loss, actor_loss, alpha_loss, grounding_loss]
             metrics = torch.stack([*losses, alpha, q.mean(), target_q.mean(), -log_prob.mean()]).tolist()
-        return dict(zip(_UPDATE_METRICS, metrics))
+        return dict(zip(UPDATE_METRICS, metrics))
 
     def _grounding_loss(
         self, batch: Batch, critic_scores: torch.Tensor | None, actor_scores: torch.Tensor | None

@@ -8,6 +8,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
 
+UPDATE_METRICS = ("critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy")
+"""The figures each update of the agent reports, in its order; ``metrics.csv`` has a column for each."""
+
 MOVED = ("buffer_size", "updates_per_step", "relabel_ratio", "relabel_corrections", "correction_share", "hindsight_share")
 """Settings that agents saved by older versions hold, now ``BufferSettings`` (``buffer_size`` as ``size``)
 and ``TrainSettings.updates_per_step``."""

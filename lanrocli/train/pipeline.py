@@ -24,6 +24,7 @@ from typing import Any
 
 import torch
 
+from lanrocli.agent.settings import UPDATE_METRICS
 from lanrocli.envs.evaluation import EvaluationReport
 from lanrocli.train.curriculum import Curriculum, diff_curricula
 from lanrocli.train.errors import RunError
@@ -37,7 +38,6 @@ from lanrocli.train.recovery import (
     saved_plan,
 )
 from lanrocli.train.runfolder import (
-    AGENT_METRICS,
     CONFIG,
     LATEST,
     METRICS,
@@ -283,7 +283,7 @@ class CurriculumRun:
             "rule_value": "" if value is None else round(value, 4),
             "rule_holds": int(holds),
         }
-        for name in AGENT_METRICS:
+        for name in UPDATE_METRICS:
             value = self.trainer.last_metrics.get(name)
             row[name] = "" if value is None else round(value, 5)
         return row

@@ -33,6 +33,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
+from lanrocli.agent.settings import UPDATE_METRICS
 from lanrocli.envs.figures import METRIC_NAMES
 from lanrocli.train.errors import CheckpointError
 from lanrocli.train.writing import fsync_dir, fsync_file, temporary
@@ -57,12 +58,9 @@ STAGE_FOLDER = re.compile(r"stage-\d+-.+")
 STEP_CHECKPOINT = re.compile(r"step-(\d+)")
 BEST_CHECKPOINT = re.compile(r"best-(\d+)")
 
-AGENT_METRICS = (
-    "critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy"
-)
 METRIC_COLUMNS = (
     "stage", "stage_name", "env_steps", "stage_steps", "wall_time", *METRIC_NAMES, "mean_return", "mean_length",
-    "train_success", "rule_value", "rule_holds", *AGENT_METRICS,
+    "train_success", "rule_value", "rule_holds", *UPDATE_METRICS,
 )
 
 

@@ -1,0 +1,238 @@
+"""``lanro eval``: a scripted policy or a trained agent measured, overall and per kind and form of correction;
+a trained agent on its run's test episodes, its correction test or a generalisation split, as its run
+measured it."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Callable
+from enum import Enum
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+
+from lanrocli.arguments import device_option, env_changes, err_console, fail, with_env_options
+from lanrocli.choices import Instruction, Split, Task
+from lanrocli.command_display import env_summary, print_evaluation
+from lanrocli.envs.settings import EnvSettings
+
+if TYPE_CHECKING:
+    from lanrocli.train.testset import Measurement
+    from lanrocli.train.trainer import TrainSettings
+
+
+class PolicyName(str, Enum):
+    oracle = "oracle"
+    mistaken = "mistaken"
+    random = "random"
+
+
+@with_env_options()
+def evaluate_command(
+    what: Annotated[
+        str,
+        typer.Argument(
+            metavar="POLICY_OR_CHECKPOINT",
+            help="A scripted policy (oracle, mistaken, random), or a trained agent: a checkpoint directory, a "
+            "pointer such as RUN/stage-2-corrections/best, or a run folder (its latest checkpoint).",
+        ),
+    ],
+    task: Annotated[Task | None, typer.Option(help="Task (scripted policies; default reach).")] = None,
+    episodes: Annotated[
+        int | None,
+        typer.Option(min=1, help="Number of episodes (default: a checkpoint's test.episodes, else 100)."),
+    ] = None,
+    seed: Annotated[
+        int | None,
+        typer.Option(
+            min=0,
+            help="Episode i uses seed SEED + i. Default: a checkpoint's held-out test episodes (the ones report.md "
+            "quotes), 0 for a scripted policy.",
+        ),
+    ] = None,
+    instruction: Annotated[
+        Instruction,
+        typer.Option(
+            help="The sentence the agent reads: the instructor's (true), none (blank), or one naming another "
+            "object on the table (other; success is the task on that object).",
+        ),
+    ] = Instruction.TRUE,
+    device: Annotated[
+        str | None,
+        typer.Option(callback=device_option, help="cpu, cuda or cuda:N for a trained agent (default: cuda if available)."),
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
+    gif: Annotated[Path | None, typer.Option(help="Write the first episodes as an animated GIF here.")] = None,
+    correction_test: Annotated[
+        bool,
+        typer.Option(
+            "--correction-test",
+            help="A trained agent on its stage's correction test, as its run measured it: every episode a "
+            "correction episode (half the spoken corrections negations, where the stage has them), on episodes "
+            "of their own, until enough corrections and negations were spoken to judge each kind and form. "
+            "--episodes caps the episodes.",
+        ),
+    ] = False,
+    split: Annotated[
+        Split | None,
+        typer.Option(
+            help="A trained agent on one generalisation split of its run's holdout (docs/generalisation.md), on the "
+            "split's own held-out episodes, as its run measured it; --episodes sets how many (default: test.episodes).",
+        ),
+    ] = None,
+    **env_options: Any,
+) -> None:
+    """Evaluate a scripted policy or a trained agent, overall and per kind and form of correction.
+
+    Success on all episodes, on correction episodes, where a correction was spoken, per kind and form of
+    correction, with 95% intervals. For a checkpoint, the environment defaults to the stage it was trained on
+    and the episodes to that stage's held-out test episodes; options change them."""
+    from lanrocli.envs.env import LanroEnv
+    from lanrocli.envs.evaluation import evaluate
+    from lanrocli.envs.policies import make_policy
+
+    changes = env_changes(env_options)
+    if correction_test and (seed is not None or instruction is not Instruction.TRUE or gif is not None):
+        raise fail("--correction-test runs episodes of its own, as the sentence the instructor speaks; leave out "
+                   "--seed, --instruction and --gif")
+    if split is not None and (correction_test or seed is not None or instruction is not Instruction.TRUE or gif or changes):
+        raise fail("--split runs the split's own episodes and settings; leave out --correction-test, --seed, "
+                   "--instruction, --gif and the environment options")
+    if what in {p.value for p in PolicyName}:
+        if split is not None:
+            raise fail("--split measures a trained agent on what its run held out; a scripted policy has no run")
+        if correction_test:
+            raise fail(
+                "--correction-test measures a trained agent on its run's held-out seeds; a scripted policy has none"
+            )
+        if instruction is not Instruction.TRUE:
+            raise fail("--instruction changes what a trained agent reads; scripted policies read no sentence")
+        task_name = task or Task.REACH
+        first = 0 if seed is None else seed
+        try:
+            env_settings = EnvSettings(**changes)
+            env = LanroEnv(task_name, env_settings, render_mode="rgb_array" if gif else None)
+        except ValueError as error:
+            raise fail(f"{error} (see 'lanro eval --help')") from None
+        try:
+            report = evaluate(env, make_policy(what, task_name), episodes or 100, first, gif)
+        finally:
+            env.close()
+        record = {"policy": what, "task": task_name, "env": env_settings.to_dict(), **report.as_dict()}
+        where = f"seed {first}"
+    elif split is not None:
+        measurement = _measure_checkpoint(Path(what), task, device, _split_test(Path(what), split, episodes))
+        report, record, task_name, env_settings = (
+            measurement.report, measurement.record, measurement.settings.task, measurement.env
+        )
+        where = f"the {split.value} split's held-out episodes"
+    elif correction_test:
+        measurement = _measure_checkpoint(Path(what), task, device, _correction_test(Path(what), changes, episodes))
+        report, record, task_name, env_settings = (
+            measurement.report, measurement.record, measurement.settings.task, measurement.env
+        )
+        quota = record["quota"]
+        negations = f" and {quota['negations']} negations" if quota["negations"] else ""
+        met = "reached" if record["quota_met"] else f"not reached in {quota['episodes']} episodes"
+        where = f"correction test ({quota['spoken']} spoken corrections{negations}: {met})"
+    else:
+        measurement = _measure_checkpoint(
+            Path(what), task, device, _test(Path(what), changes, episodes, seed, instruction, gif)
+        )
+        report, record, task_name, env_settings = (
+            measurement.report, measurement.record, measurement.settings.task, measurement.env
+        )
+        where = "held-out test episodes" if measurement.held_out else f"seed {measurement.first_seed}"
+        if instruction is not Instruction.TRUE:
+            where += f", instruction {instruction}"
+    if record.get("unknown_words"):
+        unknown = ", ".join(record["unknown_words"])
+        err_console.print(f"[bold yellow]warning:[/] {escape(f'the agent never learned the words {unknown}: it reads each as <unk>')}")
+    if as_json:
+        typer.echo(json.dumps(record))
+        return
+    print_evaluation(report, f"{what} on {task_name}, {env_summary(env_settings)}, {where}")
+    if gif:
+        Console().print(f"wrote {gif}")
+
+
+Check = Callable[["TrainSettings", EnvSettings], None]
+Measure = Callable[[Any, Check], "Measurement"]
+"""How ``lanro eval`` measures a checkpoint, given the torch device and the check of its settings."""
+
+
+def _test(
+    path: Path, overrides: dict[str, Any], episodes: int | None, seed: int | None, shown: Instruction, gif: Path | None
+) -> Measure:
+    """The checkpoint at ``path`` on its test episodes, or on others as the options ask."""
+    from lanrocli.train.testset import measure
+
+    def run(device: Any, check: Check) -> Measurement:
+        return measure(path, episodes or _test_episodes(path), device, overrides, seed, shown, gif, check=check)
+
+    return run
+
+
+def _correction_test(path: Path, overrides: dict[str, Any], episodes: int | None) -> Measure:
+    """The checkpoint at ``path`` on the correction test its run made: the quota sized like its test, at most
+    ``episodes`` episodes where given."""
+    from lanrocli.train.testset import CORRECTION_QUOTA, correction_test
+
+    def run(device: Any, check: Check) -> Measurement:
+        quota = CORRECTION_QUOTA.scaled(_test_episodes(path))
+        if episodes is not None:
+            quota = dataclasses.replace(quota, episodes=episodes)
+        return correction_test(path, quota, device, overrides, check=check)
+
+    return run
+
+
+def _split_test(path: Path, split: Split, episodes: int | None) -> Measure:
+    """The checkpoint at ``path`` on one generalisation split of its run's holdout."""
+    from lanrocli.train.testset import split_test
+
+    def run(device: Any, check: Check) -> Measurement:
+        return split_test(path, split, episodes or _test_episodes(path), device, check=check)
+
+    return run
+
+
+def _measure_checkpoint(path: Path, task: Task | None, device: str | None, run: Measure) -> Measurement:
+    """The trained agent at ``path`` measured as ``run`` does; every problem is a clear error."""
+    from lanrocli.train.errors import CheckpointError
+    from lanrocli.train.trainer import pick_device
+
+    if not path.exists():
+        raise fail(f"{path} is neither a scripted policy (oracle, mistaken, random) nor an existing checkpoint path")
+
+    def check(settings: TrainSettings, env_settings: EnvSettings) -> None:
+        if task is not None and task != settings.task:
+            raise fail(f"{path} was trained on {settings.task}; it cannot be evaluated on {task}")
+        if env_settings.objects > settings.slots:
+            raise fail(f"{path} observes at most {settings.slots} objects; --objects must not exceed that")
+
+    try:
+        return run(pick_device(device), check)
+    except (CheckpointError, KeyError) as error:
+        raise fail(f"cannot load a trained agent from {path}: {error}") from None
+    except ValueError as error:
+        raise fail(f"{error} (see 'lanro eval --help')") from None
+
+
+def _test_episodes(path: Path) -> int:
+    """The test-set size of the run that ``path`` belongs to, so ``lanro eval`` repeats what report.md quotes."""
+    from lanrocli.train.checkpoint import resolve_checkpoint
+    from lanrocli.train.curriculum import Curriculum, CurriculumError, load_curriculum
+    from lanrocli.train.sections import HeldOutConfig
+    from lanrocli.train.runfolder import CONFIG
+
+    config = resolve_checkpoint(path).parent.parent / CONFIG
+    try:
+        plan: Curriculum = load_curriculum(config)
+        return plan.test.episodes
+    except CurriculumError:
+        return HeldOutConfig().episodes
