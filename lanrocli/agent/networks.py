@@ -103,7 +103,7 @@ class SceneReader(nn.Module):
         objects = self.layout.split(obs)[1]
         keys = self.key(objects.reshape(-1, objects.shape[-1])).reshape(self.members, *present.shape, -1)
         # Products and sums rather than einsum, which on CPU became batched matmuls of one row each and made
-        # an update 16% slower (measured); these are a few vectorised passes.
+        # an update slower (docs/performance.md); these are a few vectorised passes.
         scores = (keys * self.query(language).unsqueeze(2)).sum(dim=-1) / math.sqrt(keys.shape[-1])
         return scores.masked_fill(~present, torch.finfo(scores.dtype).min)
 

@@ -134,9 +134,8 @@ class BufferSettings:
     hindsight_share: float = 0.5
     """Share of each batch drawn from the transitions that relabelling can turn into successes (their episode
     achieves the task on some object at that step or later); the rest is drawn uniformly. Sparse tasks need
-    it: when random arms touched an object in 8% of reach episodes, mostly within a few steps, 1.5% of the
-    stored transitions could be relabelled at all; uniform batches held half a success on average, and the
-    critic valued the touching step itself at -13 instead of 0 after 130k steps."""
+    it: random arms touch objects rarely, so few stored transitions can be relabelled at all, and uniform
+    batches hold almost no success (docs/lab-notebook.md has the figures)."""
     relabel_negations: bool = False
     """Relabelled corrections may be negations in every stage, not only in those whose instructor speaks
     them: an agent then meets "not the ..." from its first stage on."""

@@ -43,8 +43,9 @@ class TaskView:
     ee_position: np.ndarray  # (3,) m
 
 
-class Task:
-    """A task: whether the arm uses its gripper, per-episode parameters, and the condition C_T."""
+class TaskCondition:
+    """A task as the environment checks it: whether the arm uses its gripper, per-episode parameters, and
+    the condition C_T. Named apart from :class:`lanrocli.choices.Task`, the task's name, which it carries."""
 
     name: ClassVar[choices.Task]
 
@@ -63,7 +64,7 @@ class Task:
         raise NotImplementedError
 
 
-class Reach(Task):
+class Reach(TaskCondition):
     """A finger touches the object, and that object has not been knocked away.
 
     The condition is about that object alone, like every C_T of eq. 1: an object the arm knocked on its
@@ -80,7 +81,7 @@ class Reach(Task):
         return touch & (moved <= REACH_STILL)
 
 
-class Push(Task):
+class Push(TaskCondition):
     """The object slid farther than this episode's distance, without being lifted or tipped over."""
 
     name = choices.Task.PUSH
@@ -104,14 +105,14 @@ def held(view: TaskView) -> np.ndarray:
     return view.left_finger & view.right_finger & (horizontal < BETWEEN_FINGERS) & (raised > OFF_TABLE)
 
 
-class Grasp(Task):
+class Grasp(TaskCondition):
     name = choices.Task.GRASP
 
     def achieved(self, view: TaskView) -> np.ndarray:
         return held(view)
 
 
-class Lift(Task):
+class Lift(TaskCondition):
     """Held, and raised above this episode's height."""
 
     name = choices.Task.LIFT
@@ -127,10 +128,10 @@ class Lift(Task):
         return held(view) & (raised > self.height)
 
 
-TASK_CLASSES: dict[choices.Task, type[Task]] = {cls.name: cls for cls in (Reach, Push, Grasp, Lift)}
+TASK_CLASSES: dict[choices.Task, type[TaskCondition]] = {cls.name: cls for cls in (Reach, Push, Grasp, Lift)}
 
 
-def make_task(name: str) -> Task:
+def make_task(name: str) -> TaskCondition:
     if name not in TASK_CLASSES:
         raise ValueError(f"task must be one of {[task.value for task in choices.Task]}, got {name!r}")
     return TASK_CLASSES[choices.Task(name)]()

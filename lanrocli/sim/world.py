@@ -54,8 +54,8 @@ class World:
     """A PyBullet world with a table whose top is the plane z = 0, on a floor at its foot.
 
     One control step is a single ``stepSimulation`` call that PyBullet splits into
-    ``SUBSTEPS`` physics steps of 1 / ``PHYSICS_HZ`` s. That is about 3 % faster than 20
-    calls from Python, and gives bit-identical trajectories once motor force limits are
+    ``SUBSTEPS`` physics steps of 1 / ``PHYSICS_HZ`` s. That is faster than 20 calls from
+    Python (docs/performance.md), and gives bit-identical trajectories once motor force limits are
     multiplied by ``motor_force_scale``: PyBullet sizes the motors' impulse budget with the
     whole control step, not the physics step.
 
