@@ -372,13 +372,15 @@ def evaluate_command(
         record = {"policy": what, "task": task_name, "env": env_settings.to_dict(), **report.as_dict()}
         where = f"seed {first}"
     elif split is not None:
-        measurement = _measure_checkpoint(Path(what), task, device, _split_test(Path(what), split, episodes))
+        agent = _trained_agent(what)
+        measurement = _measure_checkpoint(agent, task, device, _split_test(agent, split, episodes))
         report, record, task_name, env_settings = (
             measurement.report, measurement.record, measurement.settings.task, measurement.env
         )
         where = f"the {split.value} split's held-out episodes"
     elif correction_test:
-        measurement = _measure_checkpoint(Path(what), task, device, _correction_test(Path(what), changes, episodes))
+        agent = _trained_agent(what)
+        measurement = _measure_checkpoint(agent, task, device, _correction_test(agent, changes, episodes))
         report, record, task_name, env_settings = (
             measurement.report, measurement.record, measurement.settings.task, measurement.env
         )
@@ -388,7 +390,7 @@ def evaluate_command(
         where = f"correction test ({quota['spoken']} spoken corrections{negations}: {met})"
     else:
         measurement = _measure_checkpoint(
-            Path(what), task, device, _test(Path(what), changes, episodes, seed, instruction, gif)
+            _trained_agent(what), task, device, _test(_trained_agent(what), changes, episodes, seed, instruction, gif)
         )
         report, record, task_name, env_settings = (
             measurement.report, measurement.record, measurement.settings.task, measurement.env
@@ -446,6 +448,17 @@ def _split_test(path: Path, split: Split, episodes: int | None) -> Measure:
         return split_test(path, split, episodes or _test_episodes(path), device, check=check)
 
     return run
+
+
+def _trained_agent(what: str) -> Path:
+    """The checkpoint path ``what`` names, or the shipped agent of that name (``lanro eval push``)."""
+    from lanrocli.train.pretrained import agent_path
+    from lanrocli.train.runfolder import CheckpointError
+
+    try:
+        return agent_path(Path(what))
+    except CheckpointError as error:
+        raise fail(f"{error}; or name a scripted policy (oracle, mistaken, random)") from None
 
 
 def _measure_checkpoint(path: Path, task: Task | None, device: str | None, run: Measure) -> Measurement:
@@ -720,6 +733,27 @@ def train_command(
     width = max(map(len, next_commands))
     lines = [f"  {command:<{width}}  # {what}" for command, what in next_commands.items()]
     console.print(f"run folder: {out}\nnext, try:", *lines, sep="\n", markup=False, highlight=False)
+
+
+@app.command("export", cls=Command)
+def export_command(
+    source: Annotated[Path, typer.Argument(help="A checkpoint, a pointer such as RUN/stage-3-negations/last, or a run folder.")],
+    out: Annotated[Path, typer.Option(help="The folder to write, which must not exist (lanrocli/pretrained/NAME to ship it).")],
+    commit: Annotated[str, typer.Option(help="The commit the agent was trained at, recorded with it.")],
+) -> None:
+    """Write a trained agent's policy alone, with the commit, seed and test figures it came from: an agent to
+    ship (lanro eval NAME and lanro play NAME find those in lanrocli/pretrained)."""
+    from lanrocli.train.pretrained import export_agent
+    from lanrocli.train.runfolder import CheckpointError
+
+    if out.exists():
+        raise fail(f"--out {out} exists; give a new folder")
+    try:
+        written = export_agent(source, out, commit)
+    except (CheckpointError, KeyError, ValueError) as error:
+        raise fail(f"cannot export {source}: {error}") from None
+    size = sum(f.stat().st_size for f in written.iterdir())
+    Console().print(f"wrote {written} ({size / 1e6:.2f} MB)")
 
 
 @app.command("plot", cls=Command)

@@ -23,6 +23,9 @@ from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 
 _FORMAT = 1
+
+POLICY_ONLY_DROPS = ("optimizer", "target_critic", "generator", "generator_device")
+"""What :meth:`SACAgent.policy_state_dict` leaves out of the agent's state."""
 _UPDATE_METRICS = ("critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy")
 
 logger = logging.getLogger(__name__)
@@ -278,6 +281,16 @@ class SACAgent:
             "updates": self.updates,
         }
 
+    def policy_state_dict(self) -> dict[str, Any]:
+        """What acting needs, and no more: :meth:`state_dict` without the optimiser's moments, the target
+        critic, the noise stream and, unless the actor reads the sentence with the critic's encoder
+        (``share_encoder``), the critic. An agent loaded from it acts exactly as the whole one; its critic,
+        where left out, is untrained."""
+        state = self.state_dict()
+        for name in (*POLICY_ONLY_DROPS, *(() if self.settings.share_encoder else ("critic",))):
+            del state[name]
+        return state
+
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
         """Restore what :meth:`state_dict` saved into an agent of the same dimensions and architecture.
 
@@ -306,11 +319,14 @@ class SACAgent:
                     f"{getattr(self.settings, name)!r}; build it with SACAgent.from_state_dict"
                 )
         self.actor.load_state_dict(state["actor"])
-        self.critic.load_state_dict(state["critic"])
-        self.target_critic.load_state_dict(state["target_critic"])
+        if "critic" in state:
+            self.critic.load_state_dict(state["critic"])
+            self.target_critic.load_state_dict(state.get("target_critic", state["critic"]))
         self.normalizer.load_state_dict(state["normalizer"])
         with torch.no_grad():
             self.log_alpha.copy_(state["log_alpha"])
+        if "optimizer" not in state:  # a policy alone (policy_state_dict): nothing of training to restore
+            return
         self.optimizer.load_state_dict(state["optimizer"])
         for group, lr in zip(self.optimizer.param_groups, self._learning_rates()):
             group["lr"] = lr
