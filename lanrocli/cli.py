@@ -741,8 +741,10 @@ def export_command(
     out: Annotated[Path, typer.Option(help="The folder to write, which must not exist (lanrocli/pretrained/NAME to ship it).")],
     commit: Annotated[str, typer.Option(help="The commit the agent was trained at, recorded with it.")],
 ) -> None:
-    """Write a trained agent's policy alone, with the commit, seed and test figures it came from: an agent to
-    ship (lanro eval NAME and lanro play NAME find those in lanrocli/pretrained)."""
+    """Write a trained agent's policy alone, with where it came from: an agent to ship.
+
+    The folder holds the commit, seed and test figures the agent came from; lanro eval NAME and lanro play
+    NAME find the agents in lanrocli/pretrained."""
     from lanrocli.train.pretrained import export_agent
     from lanrocli.train.runfolder import CheckpointError
 
