@@ -11,7 +11,7 @@ from typing import Annotated
 import typer
 
 from lanrocli import __version__
-from lanrocli.commands import evaluate, language, play, results, sweep, train
+from lanrocli.commands import evaluate, export, language, play, results, sweep, train
 from lanrocli.options import Command, Group
 
 app = typer.Typer(
@@ -42,6 +42,7 @@ app.command("sample-instructions", cls=Command)(language.sample_instructions)
 app.command("eval", cls=Command)(evaluate.evaluate_command)
 app.command("check", cls=Command)(train.check_command)
 app.command("train", cls=Command)(train.train_command)
+app.command("export", cls=Command)(export.export_command)
 app.command("plot", cls=Command)(results.plot_command)
 app.command("sweep", cls=Command)(sweep.sweep_command)
 app.command("report", cls=Command)(results.report_command)

@@ -52,6 +52,7 @@ from lanrocli.language.typed import Grammar, Utterance, unknown_words, words_of
 from lanrocli.language.vocabulary import UNK
 from lanrocli.sim import CONTROL_DT
 from lanrocli.train.errors import CheckpointError
+from lanrocli.train.pretrained import agent_path
 from lanrocli.train.trainer import AgentPolicy, load_policy, pick_device
 
 class PlayError(Exception):
@@ -154,7 +155,7 @@ def load_agent(path: Path, options: PlayOptions) -> tuple[str, EnvSettings, int,
     except ValueError as error:
         raise PlayError(str(error)) from None
     try:
-        settings, policy = load_policy(path, device)
+        settings, policy = load_policy(agent_path(path), device)
     except (CheckpointError, KeyError, TypeError, ValueError) as error:
         raise PlayError(f"cannot load a trained agent from {path}: {error}") from None
     task = options.task or settings.task

@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -127,6 +128,23 @@ class SceneReader(nn.Module):
         left = left / left.sum(dim=-1, keepdim=True).clamp(min=1e-6)
         rest = (left.unsqueeze(-1) * objects).sum(dim=-2)
         return torch.cat([arm.expand(self.members, -1, -1), named, rest], dim=2)
+
+
+def attention_loss(
+    critic_scores: torch.Tensor | None, actor_scores: torch.Tensor | None, label: np.ndarray, weight: float, device: torch.device
+) -> torch.Tensor:
+    """The grounding loss: cross-entropy of the actor's and each critic's attention (logits [members, B,
+    slots]) against the object that a transition's sentence names (``label``, -1 where none is known); zero
+    without object-wise readers, a weight of 0 or labelled transitions, so that it costs nothing then."""
+    rows = torch.as_tensor(np.flatnonzero(label >= 0), device=device)
+    if critic_scores is None or actor_scores is None or weight == 0.0 or rows.numel() == 0:
+        return torch.zeros((), device=device)
+    named = torch.as_tensor(np.asarray(label), device=device).to(torch.int64)[rows]
+    loss = torch.zeros((), device=device)
+    for scores in (critic_scores, actor_scores):
+        chosen = scores[:, rows]  # [members, rows, slots]
+        loss = loss + F.cross_entropy(chosen.flatten(0, 1), named.repeat(chosen.shape[0]))
+    return loss
 
 
 def _mlp(input_size: int, hidden_size: int, depth: int) -> nn.Sequential:

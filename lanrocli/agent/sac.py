@@ -12,18 +12,20 @@ from typing import Any
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from torch import nn
 
 from lanrocli.agent.buffer import ReplayBuffer
 from lanrocli.agent.encoder import LanguageEncoder, encode
-from lanrocli.agent.networks import Actor, Critic, ObjectLayout
+from lanrocli.agent.networks import Actor, Critic, ObjectLayout, attention_loss
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
 from lanrocli.agent.transitions import Batch
 from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 
 _FORMAT = 1
+
+POLICY_ONLY_DROPS = ("optimizer", "target_critic", "generator", "generator_device")
+"""What :meth:`SACAgent.policy_state_dict` leaves out of the agent's state."""
 
 logger = logging.getLogger(__name__)
 
@@ -199,7 +201,7 @@ class SACAgent:
         self.critic.requires_grad_(True)
         actor_loss = (alpha * log_prob - q_pi).mean()
 
-        grounding_loss = self._grounding_loss(batch, critic_scores, actor_scores)
+        grounding_loss = attention_loss(critic_scores, actor_scores, batch.label, s.grounding, self.device)
 
         # Temperature: raise alpha when the policy's entropy falls below the target, lower it above. (Without
         # tuning, log_alpha has no gradient and this loss is only reported.)
@@ -219,22 +221,6 @@ class SACAgent:
             losses = [critic_loss, actor_loss, alpha_loss, grounding_loss]
             metrics = torch.stack([*losses, alpha, q.mean(), target_q.mean(), -log_prob.mean()]).tolist()
         return dict(zip(UPDATE_METRICS, metrics))
-
-    def _grounding_loss(
-        self, batch: Batch, critic_scores: torch.Tensor | None, actor_scores: torch.Tensor | None
-    ) -> torch.Tensor:
-        """Cross-entropy of the actor's and each critic's attention (logits [members, B, slots]) against the
-        object that a transition's sentence names (``batch.label``); zero without object-wise readers, a
-        weight of 0 or labelled transitions."""
-        rows = torch.as_tensor(np.flatnonzero(batch.label >= 0), device=self.device)
-        if critic_scores is None or actor_scores is None or self.settings.grounding == 0.0 or rows.numel() == 0:
-            return torch.zeros((), device=self.device)
-        named = self._tensor(batch.label, torch.int64)[rows]
-        loss = torch.zeros((), device=self.device)
-        for scores in (critic_scores, actor_scores):
-            chosen = scores[:, rows]  # [members, rows, slots]
-            loss = loss + F.cross_entropy(chosen.flatten(0, 1), named.repeat(chosen.shape[0]))
-        return loss
 
     def learn(
         self,
@@ -278,6 +264,16 @@ class SACAgent:
             "updates": self.updates,
         }
 
+    def policy_state_dict(self) -> dict[str, Any]:
+        """What acting needs, and no more: :meth:`state_dict` without the optimiser's moments, the target
+        critic, the noise stream and, unless the actor reads the sentence with the critic's encoder
+        (``share_encoder``), the critic. An agent loaded from it acts exactly as the whole one; its critic,
+        where left out, is untrained."""
+        state = self.state_dict()
+        for name in (*POLICY_ONLY_DROPS, *(() if self.settings.share_encoder else ("critic",))):
+            del state[name]
+        return state
+
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
         """Restore what :meth:`state_dict` saved into an agent of the same dimensions and architecture.
 
@@ -306,11 +302,14 @@ class SACAgent:
                     f"{getattr(self.settings, name)!r}; build it with SACAgent.from_state_dict"
                 )
         self.actor.load_state_dict(state["actor"])
-        self.critic.load_state_dict(state["critic"])
-        self.target_critic.load_state_dict(state["target_critic"])
+        if "critic" in state:
+            self.critic.load_state_dict(state["critic"])
+            self.target_critic.load_state_dict(state.get("target_critic", state["critic"]))
         self.normalizer.load_state_dict(state["normalizer"])
         with torch.no_grad():
             self.log_alpha.copy_(state["log_alpha"])
+        if "optimizer" not in state:  # a policy alone (policy_state_dict): nothing of training to restore
+            return
         self.optimizer.load_state_dict(state["optimizer"])
         for group, lr in zip(self.optimizer.param_groups, self._learning_rates()):
             group["lr"] = lr

@@ -125,13 +125,15 @@ def evaluate_command(
         record = {"policy": what, "task": task_name, "env": env_settings.to_dict(), **report.as_dict()}
         where = f"seed {first}"
     elif split is not None:
-        measurement = _measure_checkpoint(Path(what), task, device, _split_test(Path(what), split, episodes))
+        agent = _trained_agent(what)
+        measurement = _measure_checkpoint(agent, task, device, _split_test(agent, split, episodes))
         report, record, task_name, env_settings = (
             measurement.report, measurement.record, measurement.settings.task, measurement.env
         )
         where = f"the {split.value} split's held-out episodes"
     elif correction_test:
-        measurement = _measure_checkpoint(Path(what), task, device, _correction_test(Path(what), changes, episodes))
+        agent = _trained_agent(what)
+        measurement = _measure_checkpoint(agent, task, device, _correction_test(agent, changes, episodes))
         report, record, task_name, env_settings = (
             measurement.report, measurement.record, measurement.settings.task, measurement.env
         )
@@ -141,7 +143,7 @@ def evaluate_command(
         where = f"correction test ({quota['spoken']} spoken corrections{negations}: {met})"
     else:
         measurement = _measure_checkpoint(
-            Path(what), task, device, _test(Path(what), changes, episodes, seed, instruction, gif)
+            _trained_agent(what), task, device, _test(_trained_agent(what), changes, episodes, seed, instruction, gif)
         )
         report, record, task_name, env_settings = (
             measurement.report, measurement.record, measurement.settings.task, measurement.env
@@ -199,6 +201,17 @@ def _split_test(path: Path, split: Split, episodes: int | None) -> Measure:
         return split_test(path, split, episodes or _test_episodes(path), device, check=check)
 
     return run
+
+
+def _trained_agent(what: str) -> Path:
+    """The checkpoint path ``what`` names, or the shipped agent of that name (``lanro eval push``)."""
+    from lanrocli.train.errors import CheckpointError
+    from lanrocli.train.pretrained import agent_path
+
+    try:
+        return agent_path(Path(what))
+    except CheckpointError as error:
+        raise fail(f"{error}; or name a scripted policy (oracle, mistaken, random)") from None
 
 
 def _measure_checkpoint(path: Path, task: Task | None, device: str | None, run: Measure) -> Measurement:

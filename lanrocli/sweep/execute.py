@@ -170,7 +170,10 @@ def ray_instance(resources: Resources) -> Iterator[None]:
     """Ray for the block: the cluster at ``resources.address``, or a local instance stopped afterwards."""
     options: dict[str, Any] = {"logging_level": logging.ERROR, "log_to_driver": False}
     if resources.address is None:
-        options |= {"num_cpus": resources.cpus, "include_dashboard": False}
+        # Ray starts its workers at niceness 15 unless told otherwise: a trial beside a plain training would
+        # get a small share of the cores. A local sweep's trials run at the priority of the command that
+        # started them, as that training does; a cluster's workers keep what the cluster was started with.
+        options |= {"num_cpus": resources.cpus, "include_dashboard": False, "_system_config": {"worker_niceness": 0}}
     # The local instance's processes inherit this mask: with SIGTERM blocked (Ray blocks SIGINT itself) a
     # SIGTERM to the whole process group reaches only this process, which stops the trials with their
     # checkpoints, rather than ending Ray under them. Ray's shutdown then takes a few seconds more.
