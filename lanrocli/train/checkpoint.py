@@ -6,9 +6,8 @@ a temporary name, every file fsynced, then renamed into place; the pointers that
 that (see :mod:`lanrocli.train.runfolder`). Loading uses ``torch.load(weights_only=True)`` and
 ``np.load(allow_pickle=False)``, so a file from a stranger cannot run code.
 
-Each checkpoint ends with ``manifest.json``: the format version and the size and SHA-256 of every other file,
-so a truncated or altered file is found before it is read, and named. Checkpoints written before the manifest
-(format 1) load unchecked. A write that fails (a full disk, a folder made read-only) removes its temporary
+Each checkpoint ends with ``manifest.json`` (:mod:`lanrocli.train.manifest`), so a truncated or altered file
+is found before it is read, and named. A write that fails (a full disk, a folder made read-only) removes its temporary
 directory and says how much room the checkpoint needs; the checkpoints written before it stay whole.
 
 Files written by older versions load too: their ``state.json`` also holds ``agent_settings``, a second copy
