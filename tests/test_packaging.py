@@ -17,21 +17,28 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 SOURCE = ["pyproject.toml", "README.md", "LICENSE", "lanrocli"]
 """What a build reads: the package and the files its metadata names."""
-SHIPPED = ["lanrocli/py.typed", "lanrocli/language/word_ids.txt", "lanrocli/curricula/push.yaml"]
+SHIPPED = [
+    "lanrocli/py.typed",
+    "lanrocli/language/word_ids.txt",
+    "lanrocli/curricula/push.yaml",
+    *(f"lanrocli/pretrained/push/{name}" for name in ("agent.pt", "state.json", "manifest.json")),
+]
 
 
-def run(command: list[str | Path], cwd: Path) -> str:
-    """``command`` without this checkout on the path, so that nothing is imported from it; its output."""
+def run(command: list[str | Path], cwd: Path, lines: str | None = None) -> str:
+    """``command`` without this checkout on the path, so that nothing is imported from it, reading ``lines``;
+    its output."""
     env = {key: value for key, value in os.environ.items() if key != "PYTHONPATH"}
     result = subprocess.run(
-        [str(part) for part in command], cwd=cwd, env=env, capture_output=True, text=True, timeout=600, check=False
+        [str(part) for part in command], cwd=cwd, env=env, input=lines, capture_output=True, text=True, timeout=600,
+        check=False,
     )
     assert result.returncode == 0, f"{command}:\n{result.stdout}\n{result.stderr}"
     return result.stdout + result.stderr
 
 
 @pytest.mark.slow
-def test_the_wheel_installs_and_runs_a_packaged_curriculum_from_anywhere(tmp_path: Path) -> None:
+def test_the_wheel_installs_and_runs_a_packaged_curriculum_and_agent_from_anywhere(tmp_path: Path) -> None:
     source = tmp_path / "source"  # a copy, as a build writes into the tree it builds
     source.mkdir()
     for name in SOURCE:
@@ -60,3 +67,5 @@ def test_the_wheel_installs_and_runs_a_packaged_curriculum_from_anywhere(tmp_pat
     assert Path(imported.strip()).is_relative_to(venv), imported
     checked = run([venv / "bin" / "lanro", "check", "push"], elsewhere)
     assert "push: push" in checked and "environment steps in all" in checked
+    played = run([venv / "bin" / "lanro", "play", "push", "--episodes", "1"], elsewhere, "push the red object\n")
+    assert "episode 1:" in played and "1 episode" in played  # the shipped agent, from the wheel
