@@ -8,7 +8,6 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 
 from lanrocli.arguments import CURRICULUM_HELP, SETTINGS, device_option, err_console, fail, load_plan
@@ -118,13 +117,7 @@ def train_command(
         raise fail(str(error)) from None
     for note in run.notes:
         err_console.print(f"[bold yellow]note:[/] {escape(note)}")
-    if run.state.finished:
-        try:
-            run.complete_tests()  # a run stopped while testing its last stage
-        finally:
-            run.close()
-        Console().print(f"the run in {out} has finished already; see {out / 'report.md'}")
-        return
+    already = run.state.finished  # then running it only completes tests that a stop or a kill interrupted
     again = [
         *([curriculum] if curriculum else []),
         *(["--quick"] if quick else []),
@@ -151,4 +144,7 @@ def train_command(
         console.print(f"stopped at {run.trainer.progress.env_steps:,} environment steps; checkpoint written.")
         console.print(f"resume with: {resume_hint}")
         raise typer.Exit(130)
+    if already:
+        console.print(f"the run in {out} has finished already; see {out / 'report.md'}")
+        return
     print_finished_run(console, out)

@@ -90,11 +90,7 @@ def train_trial(job: TrialJob) -> None:
     try:
         for note in run.notes:
             reporter.send(run, line=f"note: {note}")
-        if run.state.finished:
-            run.complete_tests()
-            finished = True
-        else:
-            finished = run.run(should_stop=stop.requested)
+        finished = run.run(should_stop=stop.requested)  # a finished run only completes interrupted tests
     finally:
         run.close()
     reporter.send(run, FINISHED if finished else STOPPED, "finished" if finished else "stopped: checkpoint written")

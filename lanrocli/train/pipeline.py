@@ -53,7 +53,7 @@ from lanrocli.train.runstate import RunState, StageResult, pooled_rule, watched
 from lanrocli.train.sections import Stage
 from lanrocli.train.seeds import evaluation_seed
 from lanrocli.train.tensorboard import TensorBoard
-from lanrocli.train.testset import measure_stage
+from lanrocli.train.testset import TestsStopped, measure_stage
 from lanrocli.train.trainer import Trainer, TrainSettings
 from lanrocli.train.writing import LOCK, RunLock, write_json, write_text
 
@@ -177,18 +177,21 @@ class CurriculumRun:
         checkpoint to resume from)."""
         stages = self.curriculum.stages
         every = self.curriculum.eval.every
-        self.complete_tests()
-        while not self.state.finished:
-            stage = stages[self.state.stage]
-            start = self.state.stage_start
-            if self.state.evaluations == 0 and self.trainer.progress.env_steps == start:
-                self.observer.on_stage_start(self, stage)
-            used = self.trainer.progress.env_steps - start
-            target = start + min((used // every + 1) * every, stage.budget.steps)
-            if not self.trainer.run(target, should_stop, self._on_step):
-                self._checkpoint(stage_index=self.state.stage, best=False)
-                return False
-            self._evaluate(stage)
+        try:
+            self.complete_tests(should_stop)
+            while not self.state.finished:
+                stage = stages[self.state.stage]
+                start = self.state.stage_start
+                if self.state.evaluations == 0 and self.trainer.progress.env_steps == start:
+                    self.observer.on_stage_start(self, stage)
+                used = self.trainer.progress.env_steps - start
+                target = start + min((used // every + 1) * every, stage.budget.steps)
+                if not self.trainer.run(target, should_stop, self._on_step):
+                    self._checkpoint(stage_index=self.state.stage, best=False)
+                    return False
+                self._evaluate(stage, should_stop)
+        except TestsStopped:
+            return False  # the checkpoint before the tests stands; a resumed run tests the stage again
         return True
 
     def _on_step(self, trainer: Trainer) -> None:
@@ -196,7 +199,7 @@ class CurriculumRun:
         self._tensorboard.train(trainer.progress.env_steps, figures)
         self.observer.on_step(self)
 
-    def _evaluate(self, stage: Stage) -> None:
+    def _evaluate(self, stage: Stage, should_stop: Callable[[], bool]) -> None:
         trainer, state = self.trainer, self.state
         index = state.stage
         report = trainer.evaluate(evaluation_seed(self.curriculum.seed, index, state.evaluations))
@@ -239,31 +242,33 @@ class CurriculumRun:
                 )
         self._checkpoint(stage_index=index, best=improved)
         if result is not None:
-            self._test(result)
+            self._test(result, should_stop)
             self.observer.on_stage_end(self, result)
             if not state.finished:
                 self._enter(state.stage)
         self._tensorboard.mark(trainer.progress.env_steps)
 
-    def _test(self, result: StageResult) -> None:
+    def _test(self, result: StageResult, should_stop: Callable[[], bool] = lambda: False) -> None:
         """The stage's agents measured (:func:`lanrocli.train.testset.measure_stage`), ``test.json`` and
         ``report.md`` written."""
         stage = self.curriculum.stages[result.index]
         folder = self.out / stage_folder(result.index, stage.name)
         final = self.state.finished and result is self.state.results[-1]
+        splits = self.trainer.settings.holdout.splits
         record, figures = measure_stage(
-            folder, self.curriculum.test.episodes, self.trainer.device, final, self.trainer.settings.holdout.splits
+            folder, self.curriculum.test.episodes, self.trainer.device, final, splits, should_stop
         )
         write_json(folder / TEST, record)
         write_report(self.out, self.curriculum, self.state)
         self._tensorboard.test(result.end, figures)
 
-    def complete_tests(self) -> None:
-        """Measure stages that ended but were not measured yet: a run killed while testing does it on resume."""
+    def complete_tests(self, should_stop: Callable[[], bool] = lambda: False) -> None:
+        """Measure stages that ended but were not measured yet: a run killed or stopped while testing does it
+        on resume. Raises ``TestsStopped`` where ``should_stop`` asks to stop first."""
         for result in self.state.results:
             stage = self.curriculum.stages[result.index]
             if not (self.out / stage_folder(result.index, stage.name) / TEST).is_file():
-                self._test(result)
+                self._test(result, should_stop)
 
     def _enter(self, index: int) -> None:
         self.trainer.enter_stage(self.curriculum.stages[index].env.settings(), index)

@@ -248,30 +248,49 @@ def split_test(
 # -- a stage's agents --------------------------------------------------------------------------------------
 
 
+class TestsStopped(Exception):
+    """A stop request arrived while a stage's agents were being tested: nothing of the tests is kept, and a
+    resumed run measures the stage again from its first episode."""
+
+
 def measure_stage(
-    folder: Path, episodes: int, device: str | torch.device, final: bool, splits: tuple[Split, ...]
+    folder: Path,
+    episodes: int,
+    device: str | torch.device,
+    final: bool,
+    splits: tuple[Split, ...],
+    should_stop: Callable[[], bool] = lambda: False,
 ) -> tuple[dict[str, Any], dict[str, dict[str, float | int | None]]]:
     """The ``test.json`` record of the stage in ``folder`` and its figures by agent: its last and best agents
     on its held-out test episodes, read back from their checkpoints. The run's ``final`` stage also has its
     last agent read a blank and another object's sentence, its agents on the correction test, sized like the
     test (``CorrectionQuota.scaled``), and on each generalisation split in ``splits``, as many episodes as
-    the test."""
+    the test. A stop request is looked at after every episode and raises :class:`TestsStopped`: the tests
+    of a last stage take minutes, longer than a cluster's scheduler waits after it asks a job to stop."""
+
+    def progress(_: int) -> None:
+        if should_stop():
+            raise TestsStopped(f"stopped while testing the agents of {folder.name}")
+
     agents = [name for name in (LAST, BEST) if (folder / name).is_file()]
-    tested = once_per_agent(folder, agents, lambda path: measure(path, episodes, device))
+    tested = once_per_agent(folder, agents, lambda path: measure(path, episodes, device, progress=progress))
     record: dict[str, Any] = records(tested)
     figures = {name: measurement.report.metrics() for name, measurement in tested.items()}
     if final:
         plain = {"correction_rate": 0.0}
         language = {
-            shown.value: measure(folder / LAST, episodes, device, plain, instruction=shown) for shown in Instruction
+            shown.value: measure(folder / LAST, episodes, device, plain, instruction=shown, progress=progress)
+            for shown in Instruction
         }
         record[LANGUAGE] = records(language)
         quota = CORRECTION_QUOTA.scaled(episodes)
-        corrections = once_per_agent(folder, agents, lambda path: correction_test(path, quota, device))
+        corrections = once_per_agent(folder, agents, lambda path: correction_test(path, quota, device, progress=progress))
         record[CORRECTION_TEST] = records(corrections)
         measured = {LANGUAGE: language, CORRECTION_TEST: corrections}
         if splits:
-            split_tests = {split.value: _split_tests(folder, agents, split, episodes, device) for split in splits}
+            split_tests = {
+                split.value: _split_tests(folder, agents, split, episodes, device, progress) for split in splits
+            }
             record[SPLITS] = {split: records(by_agent) for split, by_agent in split_tests.items()}
             measured |= {f"{SPLITS}/{split}": by_agent for split, by_agent in split_tests.items()}
         for kind, by_name in measured.items():
@@ -280,9 +299,14 @@ def measure_stage(
 
 
 def _split_tests(
-    folder: Path, agents: list[str], split: Split, episodes: int, device: str | torch.device
+    folder: Path,
+    agents: list[str],
+    split: Split,
+    episodes: int,
+    device: str | torch.device,
+    progress: Callable[[int], None],
 ) -> dict[str, Measurement]:
-    return once_per_agent(folder, agents, lambda path: split_test(path, split, episodes, device))
+    return once_per_agent(folder, agents, lambda path: split_test(path, split, episodes, device, progress))
 
 
 def once_per_agent(

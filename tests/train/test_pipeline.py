@@ -17,7 +17,7 @@ from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.checkpoint import AGENT_FILE, resolve_checkpoint
 from lanrocli.train.curriculum import Curriculum, load_curriculum
 from lanrocli.train.errors import RunError
-from lanrocli.train.pipeline import CurriculumRun
+from lanrocli.train.pipeline import CurriculumRun, RunObserver
 from lanrocli.train.recovery import restore_files as _restore_files
 from lanrocli.train.runfolder import (
     CONFIG,
@@ -272,3 +272,38 @@ def test_a_best_agent_that_is_the_last_one_is_measured_once(tmp_path: Path) -> N
     write_pointer(tmp_path / "best", "best-0000000010")
     records = _records(_once_per_agent(tmp_path, ["last", "best"], measured))
     assert calls[1:] == ["step-0000000020", "best-0000000010"] and records["best"]["success"] == 3
+
+
+def test_a_stop_request_during_the_tests_stops_at_once_and_the_resumed_run_tests_alike(tmp_path: Path) -> None:
+    data = load_curriculum(tiny(tmp_path)).model_dump()
+    data["stages"] = [data["stages"][2]]  # the last stage's tests: language check, correction test, splits
+    plan = Curriculum.model_validate(data)
+    measured: list[int] = []
+
+    class StopOnceTested(RunObserver):
+        def on_evaluation(self, run: CurriculumRun, row: dict) -> None:  # the tests follow the last evaluation
+            measured.append(len(row))
+
+    requested = {"episodes": 0}
+
+    def should_stop() -> bool:  # asked after every test episode once training is over: the third says stop
+        if measured and len(measured) == 2:
+            requested["episodes"] += 1
+        return requested["episodes"] >= 3
+
+    run = CurriculumRun.start(plan, tmp_path / "run", observer=StopOnceTested())
+    scripted(run, iter([report([False, False])] * 2))
+    assert not run.run(should_stop)
+    run.close()
+    folder = tmp_path / "run" / "stage-1-third"
+    assert requested["episodes"] == 3 and not (folder / TEST).is_file()  # stopped at the third test episode
+
+    resumed = CurriculumRun.resume(tmp_path / "run", plan)
+    assert resumed.state.finished and resumed.run()
+    resumed.close()
+    straight = CurriculumRun.start(plan, tmp_path / "straight")
+    scripted(straight, iter([report([False, False])] * 2))
+    assert straight.run()
+    straight.close()
+    again, once = (json.loads((root / "stage-1-third" / TEST).read_text()) for root in (tmp_path / "run", tmp_path / "straight"))
+    assert again == once
