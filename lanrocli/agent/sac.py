@@ -308,12 +308,12 @@ class SACAgent:
         self.normalizer.load_state_dict(state["normalizer"])
         with torch.no_grad():
             self.log_alpha.copy_(state["log_alpha"])
+        self.updates = int(state["updates"])
         if "optimizer" not in state:  # a policy alone (policy_state_dict): nothing of training to restore
             return
         self.optimizer.load_state_dict(state["optimizer"])
         for group, lr in zip(self.optimizer.param_groups, self._learning_rates()):
             group["lr"] = lr
-        self.updates = int(state["updates"])
         self._restore_generator(state)
 
     def _restore_generator(self, state: Mapping[str, Any]) -> None:

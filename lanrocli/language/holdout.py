@@ -13,9 +13,15 @@ from typing import Any
 
 from lanrocli.choices import Split
 from lanrocli.language.grammar import Phrase
-from lanrocli.language.properties import COLOURS, RARE_COLOUR_WORDS, RARE_WORD_COLOURS, SHAPE_WORDS, SHAPES, ObjectProps
-
-SHAPE_OF_WORD: dict[str, str] = {word: shape for shape, words in SHAPE_WORDS.items() for word in words}
+from lanrocli.language.properties import (
+    COLOURS,
+    RARE_COLOUR_WORDS,
+    RARE_WORD_COLOURS,
+    SHAPE_WORDS,
+    SHAPES,
+    WORD_SHAPES,
+    ObjectProps,
+)
 
 
 def parse_pair(text: str) -> ObjectProps:
@@ -59,10 +65,10 @@ class Holdout:
         pairs = tuple(parse_pair(p) if isinstance(p, str) else p for p in self.pairs)
         object.__setattr__(self, "pairs", pairs)
         _distinct(list(pairs), "pairs")
-        words = self._known_words("correction_words", SHAPE_OF_WORD, "shape words")
+        words = self._known_words("correction_words", WORD_SHAPES, "shape words")
         if words:
             for shape in SHAPES:
-                mine = [w for w in words if SHAPE_OF_WORD[w] == shape]
+                mine = [w for w in words if WORD_SHAPES[w] == shape]
                 if len(mine) != 1:
                     raise ValueError(
                         f"correction_words needs exactly one word for each shape (so every correction of the split "

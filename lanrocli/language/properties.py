@@ -41,6 +41,9 @@ SHAPE_WORDS: dict[str, tuple[str, ...]] = {
     "cylinder": ("cylinder", "barrel", "tophat"),
 }
 
+WORD_SHAPES: dict[str, str] = {word: shape for shape, words in SHAPE_WORDS.items() for word in words}
+"""Each shape word to the shape it names."""
+
 TASKS: tuple[str, ...] = tuple(task.value for task in Task)
 
 TASK_VERBS: dict[str, tuple[str, ...]] = {

@@ -13,14 +13,11 @@ from dataclasses import dataclass
 
 from lanrocli.choices import CorrectionForm
 from lanrocli.language.grammar import BEGINNING_WORDS, all_corrections, all_instructions, extend
-from lanrocli.language.properties import COLOURS, RARE_WORD_COLOURS, SHAPE_WORDS, ObjectProps
+from lanrocli.language.properties import COLOURS, RARE_WORD_COLOURS, WORD_SHAPES, ObjectProps
 from lanrocli.language.vocabulary import Vocabulary
 
 COLOUR_OF_WORD: Mapping[str, str] = {**{c: c for c in COLOURS}, **RARE_WORD_COLOURS}
 """Every word that names a colour (common and rare), to the colour it names."""
-
-SHAPE_OF_WORD: Mapping[str, str] = {w: shape for shape, words in SHAPE_WORDS.items() for w in words}
-"""Every word that names a shape, to the shape it names."""
 
 NEGATION = BEGINNING_WORDS[CorrectionForm.NEGATION][0]
 
@@ -51,7 +48,7 @@ class Description:
     def of(cls, words: Sequence[str], correction: bool = False) -> Description:
         return cls(
             frozenset(COLOUR_OF_WORD[w] for w in words if w in COLOUR_OF_WORD),
-            frozenset(SHAPE_OF_WORD[w] for w in words if w in SHAPE_OF_WORD),
+            frozenset(WORD_SHAPES[w] for w in words if w in WORD_SHAPES),
             correction and bool(words) and words[0] == NEGATION,
         )
 

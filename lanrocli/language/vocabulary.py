@@ -144,6 +144,6 @@ def agent_vocabulary(saved: dict[str, Any] | None, vocab_size: int) -> Vocabular
     return vocabulary
 
 
-def unknown_words(vocabulary: Vocabulary) -> list[str]:
+def unlearned_words(vocabulary: Vocabulary) -> list[str]:
     """The grammar's words that ``vocabulary`` lacks: an agent reads each of them as ``<unk>``."""
     return [w for w in grammar_vocabulary().words[2:] if w not in vocabulary]

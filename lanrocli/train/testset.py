@@ -24,7 +24,7 @@ from lanrocli.choices import CorrectionForm, Instruction, Kind, Split
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.evaluation import EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
-from lanrocli.language.vocabulary import unknown_words
+from lanrocli.language.vocabulary import unlearned_words
 from lanrocli.train.checkpoint import resolve_checkpoint
 from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, SPLITS
 from lanrocli.train.seeds import correction_test_seed, held_out_seed, split_test_seed
@@ -145,7 +145,7 @@ def _record(
         "env": loaded.env.to_dict(),
         "episodes_from": episodes_from,
         "instruction": instruction.value,
-        "unknown_words": unknown_words(loaded.policy.vocabulary),
+        "unknown_words": unlearned_words(loaded.policy.vocabulary),
         **report.as_dict(),
     }
 

@@ -21,7 +21,7 @@ from lanrocli.language import (
 )
 from lanrocli.language import vocabulary as vocabulary_module
 from lanrocli.language.grammar import grammar_words
-from lanrocli.language.vocabulary import agent_vocabulary, listed_words, unknown_words
+from lanrocli.language.vocabulary import agent_vocabulary, listed_words, unlearned_words
 
 
 def test_vocabulary_is_exactly_the_words_the_grammar_speaks() -> None:
@@ -71,8 +71,8 @@ def test_an_agent_reads_with_its_own_vocabulary_or_the_one_it_was_trained_with()
 
 
 def test_unknown_words_names_the_grammar_words_an_agent_lacks() -> None:
-    assert unknown_words(grammar_vocabulary()) == []
-    assert unknown_words(Vocabulary(list(grammar_vocabulary().words[3:]), 10)) == [grammar_vocabulary().words[2]]
+    assert unlearned_words(grammar_vocabulary()) == []
+    assert unlearned_words(Vocabulary(list(grammar_vocabulary().words[3:]), 10)) == [grammar_vocabulary().words[2]]
 
 
 @pytest.mark.parametrize("task", TASKS)
