@@ -2,7 +2,7 @@
 spent waiting for the simulation, sampling (and relabelling) batches, and updating the networks.
 
 Settings: reach with 2 objects, 2 environments (subprocesses), one update per environment step, batch 256
-(``--batch-size``, for both agents), updates starting after ``--learning-starts`` steps. If stable-baselines3
+(``--batch-size``, for both agents), on the CPU (``--device``, for both agents), updates starting after ``--learning-starts`` steps. If stable-baselines3
 is installed, its SAC (``MultiInputPolicy``, same batch, same update ratio, same environment, same steps) runs
 in the same session and the ratio is printed. With ``--rounds N`` the two alternate N times and the medians
 are reported, which evens out a shared machine's drift better than one long run each.
@@ -44,10 +44,10 @@ class Stopwatch:
 
 
 def run_ours(
-    steps: int, envs: int, learning_starts: int, seed: int, architecture: str, batch_size: int
+    steps: int, envs: int, learning_starts: int, seed: int, architecture: str, batch_size: int, device: str
 ) -> dict[str, float]:
     settings = TrainSettings(task="reach", env=EnvSettings(objects=2), seed=seed, envs=envs, learning_starts=learning_starts)
-    trainer = Trainer(settings, SACSettings(batch_size=batch_size, architecture=architecture))
+    trainer = Trainer(settings, SACSettings(batch_size=batch_size, architecture=architecture), device=device)
     simulation, sampling, updating = Stopwatch(), Stopwatch(), Stopwatch()
     trainer.run(envs)  # start the environments before the clock
     collector = trainer._collector
@@ -71,7 +71,9 @@ def run_ours(
     }
 
 
-def run_sb3(steps: int, envs: int, learning_starts: int, seed: int, batch_size: int) -> dict[str, float] | None:
+def run_sb3(
+    steps: int, envs: int, learning_starts: int, seed: int, batch_size: int, device: str
+) -> dict[str, float] | None:
     try:
         from stable_baselines3 import SAC
         from stable_baselines3.common.vec_env import SubprocVecEnv
@@ -86,7 +88,7 @@ def run_sb3(steps: int, envs: int, learning_starts: int, seed: int, batch_size: 
         gradient_steps=-1,  # one update per environment step collected, as ours
         learning_starts=learning_starts,
         seed=seed,
-        device="cpu",
+        device=device,
         verbose=0,
     )
     start = time.perf_counter()
@@ -106,6 +108,7 @@ def main() -> None:
     parser.add_argument("--batch-size", type=int, default=256, help="of both agents")
     parser.add_argument("--architecture", choices=["flat", "objects"], default="flat", help="of our agent")
     parser.add_argument("--rounds", type=int, default=1, help="alternate ours and stable-baselines3 this many times")
+    parser.add_argument("--device", default="cpu", help="where both agents learn: cpu, cuda or cuda:N")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     if args.rounds < 1:
@@ -114,8 +117,10 @@ def main() -> None:
 
     rounds = []
     for _ in range(args.rounds):
-        result = run_ours(args.steps, args.envs, args.learning_starts, args.seed, args.architecture, args.batch_size)
-        sb3 = run_sb3(args.steps, args.envs, args.learning_starts, args.seed, args.batch_size)
+        result = run_ours(
+            args.steps, args.envs, args.learning_starts, args.seed, args.architecture, args.batch_size, args.device
+        )
+        sb3 = run_sb3(args.steps, args.envs, args.learning_starts, args.seed, args.batch_size, args.device)
         if sb3 is not None:
             result.update(sb3, ratio=result["env_steps_per_s"] / sb3["sb3_env_steps_per_s"])
         rounds.append(result)

@@ -440,7 +440,8 @@ def test_states_move_between_cpu_and_cuda_in_both_directions() -> None:
         moved = SACAgent.from_state_dict(_round_trip(agent.state_dict(), target), device=target)
         assert moved.generator.device.type == target
         assert all(t.device.type == target for t in [*_parameters(moved), moved.normalizer.mean])
-        np.testing.assert_allclose(agent.act(obs, deterministic=True), moved.act(obs, deterministic=True), atol=1e-5)
+        # The same weights, but the GPU's kernels sum in another order than the CPU's.
+        np.testing.assert_allclose(agent.act(obs, deterministic=True), moved.act(obs, deterministic=True), atol=1e-4)
         assert np.isfinite(moved.update(_batch(rng))["critic_loss"]) and moved.updates == 2
 
 
