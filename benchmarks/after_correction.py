@@ -30,7 +30,8 @@ import torch
 
 from lanrocli.envs.env import FALLEN, LanroEnv
 from lanrocli.envs.tasks import REACH_STILL
-from lanrocli.train.trainer import AgentPolicy, load_policy
+from lanrocli.train.agent_policy import AgentPolicy
+from lanrocli.train.trainer import load_policy
 
 
 @dataclass(frozen=True)

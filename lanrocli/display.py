@@ -44,9 +44,16 @@ def evaluation_summary(row: dict[str, Any]) -> str:
     return f"success {_percent(row['success'])}, corrected {_percent(row['corrected_success'])} of {row['corrected_episodes']}"
 
 
-def stage_end_line(result: StageResult) -> str:
+def stage_end_line(result: StageResult, rates: dict[str, float | None] | None = None) -> str:
+    """The line a stage's end prints; with its ``rates`` (``RunState.rates``), where the time went."""
     how = "promoted" if result.ended == "promoted" else "budget spent"
-    return f"stage {result.index + 1} {result.name} ended ({how}) after {result.end - result.start:,} steps"
+    line = f"stage {result.index + 1} {result.name} ended ({how}) after {result.end - result.start:,} steps"
+    if rates:
+        units = {"collection": "steps/s collecting", "updates": "updates/s", "evaluation": "steps/s evaluating"}
+        line += "; " + ", ".join(f"{value:,.0f} {units[phase]}" for phase, value in rates.items() if value is not None)
+    if result.test_seconds is not None:
+        line += f"; tests {result.test_seconds / 60:.1f} min"
+    return line
 
 
 class StepRate:
@@ -151,4 +158,5 @@ class TrainingDisplay(RunObserver):
             self.console.print(line)
 
     def on_stage_end(self, run: CurriculumRun, result: StageResult) -> None:
-        (self._progress.console if self._progress is not None else self.console).print(stage_end_line(result))
+        console = self._progress.console if self._progress is not None else self.console
+        console.print(stage_end_line(result, run.state.rates(result)))

@@ -53,7 +53,8 @@ from lanrocli.language.vocabulary import UNK
 from lanrocli.sim import CONTROL_DT
 from lanrocli.train.errors import CheckpointError
 from lanrocli.train.pretrained import agent_path
-from lanrocli.train.trainer import AgentPolicy, load_policy, pick_device
+from lanrocli.train.agent_policy import AgentPolicy
+from lanrocli.train.trainer import load_policy, pick_device
 
 class PlayError(Exception):
     """Something the person can put right (a checkpoint, an option, a line), said in words, not a traceback."""

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import logging
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -16,6 +15,7 @@ from torch import nn
 
 from lanrocli.agent.buffer import ReplayBuffer
 from lanrocli.agent.encoder import LanguageEncoder, encode
+from lanrocli.agent.noise import restore_generator
 from lanrocli.agent.networks import Actor, Critic, ObjectLayout, attention_loss
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
@@ -26,8 +26,6 @@ _FORMAT = 1
 
 POLICY_ONLY_DROPS = ("optimizer", "target_critic", "generator", "generator_device")
 """What :meth:`SACAgent.policy_state_dict` leaves out of the agent's state."""
-
-logger = logging.getLogger(__name__)
 
 
 class SACAgent:
@@ -113,33 +111,40 @@ class SACAgent:
         raw = self._tensor(observations, torch.float32).reshape(-1, self.obs_dim)
         return self.normalizer(raw), None if self.layout is None else self.layout.present(raw)
 
+    def _read(self, obs: Mapping[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
+        """Normalised observations, the slots that hold objects, and the actor's summary of the sentences."""
+        x, present = self._observe(np.asarray(obs["observation"]))
+        tokens = self._tensor(obs["instruction"], torch.int64).reshape(x.shape[0], -1)
+        return x, present, self.actor_encoder(tokens)
+
     @torch.no_grad()
     def act(self, obs: Mapping[str, np.ndarray], deterministic: bool = False) -> np.ndarray:
         """Actions in [-1, 1] for a batch ``{"observation": [B, N], "instruction": [B, L]}`` (or one
         unbatched observation, answered with one unbatched action)."""
         observation = np.asarray(obs["observation"])
-        single = observation.ndim == 1
-        x, present = self._observe(observation)
-        tokens = self._tensor(obs["instruction"], torch.int64).reshape(x.shape[0], -1)
-        language = self.actor_encoder(tokens)
         if deterministic:
-            action = self.actor.mode(x, language, present)
+            out = self.act_and_attend(obs)[0]
         else:
-            action, _ = self.actor.sample(x, language, self.generator, present)
-        out = action.cpu().numpy()
-        return out[0] if single else out
+            x, present, language = self._read(obs)
+            out = self.actor.sample(x, language, self.generator, present)[0].cpu().numpy()
+        return out[0] if observation.ndim == 1 else out
 
-    @torch.no_grad()
     def attention(self, obs: Mapping[str, np.ndarray]) -> np.ndarray | None:
         """The actor's attention over the object slots, [B, slots] (or [slots] for one unbatched
         observation), summing to 1 over the present objects; None for a flat agent, which has none."""
+        weights = self.act_and_attend(obs)[1]
+        return weights[0] if weights is not None and np.asarray(obs["observation"]).ndim == 1 else weights
+
+    @torch.no_grad()
+    def act_and_attend(self, obs: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
+        """For a batch as :meth:`act` takes it: the deterministic actions [B, A] and the actor's attention
+        [B, slots] (None for a flat agent), both from one reading of the sentences and the objects."""
+        x, present, language = self._read(obs)
         if self.actor.reader is None:
-            return None
-        observation = np.asarray(obs["observation"])
-        x, present = self._observe(observation)
-        tokens = self._tensor(obs["instruction"], torch.int64).reshape(x.shape[0], -1)
-        weights = self.actor.reader.scores(x, self.actor_encoder(tokens), present)[0].softmax(dim=-1).cpu().numpy()
-        return weights[0] if observation.ndim == 1 else weights
+            return self.actor.mode(x, language, present).cpu().numpy(), None
+        scores = self.actor.reader.scores(x, language, present)
+        mean, _ = self.actor(x, language, present, scores)
+        return torch.tanh(mean).cpu().numpy(), scores[0].softmax(dim=-1).cpu().numpy()
 
     def update_normalizer(self, observations: np.ndarray) -> None:
         """Add collected observations [n, N] to the normaliser's statistics (not relabelled samples)."""
@@ -314,26 +319,7 @@ class SACAgent:
         self.optimizer.load_state_dict(state["optimizer"])
         for group, lr in zip(self.optimizer.param_groups, self._learning_rates()):
             group["lr"] = lr
-        self._restore_generator(state)
-
-    def _restore_generator(self, state: Mapping[str, Any]) -> None:
-        """Continue the saved noise stream on the device type that saved it, else start a derived one."""
-        saved = state["generator"].cpu()
-        saved_on = state.get("generator_device")
-        if saved_on is None:  # written before the device type was recorded: the state's size tells
-            same_kind = saved.numel() == self.generator.get_state().numel()
-        else:
-            same_kind = saved_on == self.device.type
-        if same_kind:
-            self.generator.set_state(saved)
-            return
-        seed = int(np.random.SeedSequence([self.seed, self.updates]).generate_state(1)[0])
-        self.generator.manual_seed(seed)
-        logger.warning(
-            "the agent's exploration noise was saved on %s and cannot continue on %s; it restarts from a stream "
-            "derived from the agent's seed (%d) and update count (%d)",
-            saved_on or "another device type", self.device.type, self.seed, self.updates,
-        )
+        restore_generator(self.generator, state, self.device.type, self.seed, self.updates)
 
     @classmethod
     def from_state_dict(cls, state: Mapping[str, Any], device: str | torch.device = "cpu") -> SACAgent:

@@ -6,7 +6,7 @@ figures themselves are the registry of :mod:`lanrocli.envs.figures`.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -14,10 +14,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lanrocli.choices import CorrectionForm, Instruction
-from lanrocli.language import TASK_VERBS, identifying_phrases, instruction, pick
-from lanrocli.envs.figures import ATTENTION, FIGURE, FIGURES, PHASES, PLAIN, EpisodeResult, Rate, _rate
+from lanrocli.envs.figures import ATTENTION, FIGURE, FIGURES, PHASES, EpisodeResult, Rate, _rate
 from lanrocli.envs.instructor import MAX_CORRECTIONS
-from lanrocli.reward import reward
+from lanrocli.envs.rollout import run_episodes
 
 if TYPE_CHECKING:
     from lanrocli.envs.env import LanroEnv
@@ -25,8 +24,10 @@ if TYPE_CHECKING:
 
 GIF_EPISODES = 3
 
-OTHER_STREAM = 0x07E4
-"""Mixed into an episode's seed to draw the object that ``other`` names, apart from the episode's own draws."""
+SIDE_BY_SIDE = 4
+"""How many episodes a run's evaluations and tests play side by side. Fixed, not the machine's core count:
+a network's batched arithmetic rounds in the last bit differently for other batch sizes, which can change
+an episode's outcome, so the same checkpoint must always be measured with the same number."""
 
 
 @dataclass
@@ -128,76 +129,8 @@ class EvaluationReport:
         }
 
 
-def _other_sentence(env: LanroEnv, info: dict[str, Any], seed: int) -> tuple[int, np.ndarray]:
-    """An object other than the goal and an instruction that names it uniquely, drawn from the seed."""
-    rng = np.random.default_rng([seed, OTHER_STREAM])
-    objects = list(info["objects"])
-    named = int(pick(rng, [i for i in range(len(objects)) if i != int(info["goal_index"])]))
-    others = objects[:named] + objects[named + 1 :]
-    text = instruction(pick(rng, TASK_VERBS[env.task.name]), pick(rng, identifying_phrases(objects[named], others)))
-    return named, env.vocabulary.encode(text)
-
-
-def _phase(info: dict[str, Any]) -> str:
-    """The phase of the step about to be taken: plain, or the form of the correction spoken last."""
-    correction = info["correction"]
-    return PLAIN if correction is None else str(correction["form"])
-
-
-Attend = Callable[[dict[str, np.ndarray]], np.ndarray | None]
-"""A policy's optional ``attention(observation)``: its weights over the object slots (slot k is object k of
-the observation), or None where it has none. Evaluation reads it without knowing what computes it, so this
-module needs no torch; scripted policies have no such method."""
-
-
-def run_episode(
-    env: LanroEnv,
-    policy: Policy,
-    seed: int,
-    frames: list[np.ndarray] | None = None,
-    instruction_shown: Instruction = Instruction.TRUE,
-) -> EpisodeResult:
-    """One episode; with ``instruction_shown`` other than ``true`` the agent reads the replacement sentence
-    all episode, and success, return and attention are judged on the object that sentence names."""
-    observation, info = env.reset(seed=seed)
-    policy.reset(seed=seed)
-    attend: Attend | None = getattr(policy, "attention", None)
-    target, tokens = int(info["goal_index"]), None
-    if instruction_shown is Instruction.BLANK:
-        tokens = np.zeros_like(observation["instruction"])
-    elif instruction_shown is Instruction.OTHER:
-        target, tokens = _other_sentence(env, info, seed)
-    total, length = 0.0, 0
-    shares: dict[str, list[float]] = {}
-    if frames is not None:
-        frames.append(env.render())
-    while True:
-        shown = observation if tokens is None else {**observation, "instruction": tokens}
-        weights = None if attend is None else attend(shown)
-        if weights is not None:
-            shares.setdefault(_phase(info), []).append(float(weights[target]))
-        observation, _, terminated, truncated, info = env.step(policy.act(shown, info))
-        achieved = bool(info["achieved"][target])
-        total += reward(achieved)
-        length += 1
-        if frames is not None:
-            frames.append(env.render())
-        if terminated or truncated or achieved:
-            break
-    correction = info["correction"]
-    return EpisodeResult(
-        success=achieved,
-        length=length,
-        challenge=info["challenge"],
-        form=None if correction is None else CorrectionForm(correction["form"]),
-        returned=total,
-        attention={phase: (sum(values), len(values)) for phase, values in shares.items()},
-        corrections=0 if correction is None else int(correction["index"]),
-    )
-
-
 def evaluate(
-    env: LanroEnv,
+    env: LanroEnv | Sequence[LanroEnv],
     policy: Policy,
     episodes: int,
     seed: int,
@@ -206,22 +139,25 @@ def evaluate(
     instruction_shown: Instruction = Instruction.TRUE,
     enough: Callable[[EvaluationReport], bool] | None = None,
 ) -> EvaluationReport:
-    """Episode i is reset with seed ``seed + i``, so every policy meets the very same episodes. With
+    """Episode i is reset with seed ``seed + i``, so every policy meets the very same episodes; given several
+    environments (alike), as many episodes run side by side (:mod:`lanrocli.envs.rollout`). With
     ``enough``, the run stops after the first episode at which it holds (``episodes`` is then the most run):
     the same episodes and policy always stop at the same one."""
-    if gif is not None and env.render_mode != "rgb_array":
-        raise ValueError("recording a GIF needs an environment made with render_mode='rgb_array'")
+    envs = list(env) if isinstance(env, Sequence) else [env]
+    if gif is not None and any(e.render_mode != "rgb_array" for e in envs):
+        raise ValueError("recording a GIF needs environments made with render_mode='rgb_array'")
     report = EvaluationReport()
-    frames: list[np.ndarray] = []
-    for i in range(episodes):
-        recording = gif is not None and i < GIF_EPISODES
-        report.results.append(run_episode(env, policy, seed + i, frames if recording else None, instruction_shown))
+    recordings: dict[int, list[np.ndarray]] = {i: [] for i in range(GIF_EPISODES)} if gif is not None else {}
+
+    def on_result(result: EpisodeResult) -> bool:
+        report.results.append(result)
         if progress is not None:
-            progress(i + 1)
-        if enough is not None and enough(report):
-            break
+            progress(len(report.results))
+        return enough is None or not enough(report)
+
+    run_episodes(envs, policy, episodes, seed, on_result, instruction_shown, recordings.get)
     if gif is not None:
-        save_gif(frames, gif, env.metadata["render_fps"])
+        save_gif([frame for i in sorted(recordings) for frame in recordings[i]], gif, envs[0].metadata["render_fps"])
     return report
 
 

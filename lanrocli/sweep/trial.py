@@ -62,7 +62,7 @@ class TuneReporter(RunObserver):
         self.send(run, line=f"step {row['env_steps']:,}: evaluation {self.evaluation}")
 
     def on_stage_end(self, run: CurriculumRun, result: StageResult) -> None:
-        self.send(run, line=stage_end_line(result))
+        self.send(run, line=stage_end_line(result, run.state.rates(result)))
 
 
 def _wait_for_lock(out: Path) -> None:

@@ -25,7 +25,7 @@ import pickle
 import shutil
 import zipfile
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -67,6 +67,8 @@ class Checkpoint:
     """Each environment's unfinished episode as arrays."""
     environments: list[dict[str, Any]] | None = None
     """Each environment's snapshot, to rebuild it mid-episode."""
+    clock: dict[str, Any] = field(default_factory=dict)
+    """Where the run's time went (``PhaseClock``); empty in checkpoints written before it was kept."""
 
     def __post_init__(self) -> None:
         if len({part is None for part in (self.buffer, self.partials, self.environments)}) > 1:
@@ -184,6 +186,7 @@ def _plain_state(contents: Checkpoint) -> dict[str, Any]:
         "rng": state_to_json(contents.rng),
         "wall_time": contents.wall_time,
         "extra": contents.extra,
+        "clock": contents.clock,
     }
     if contents.environments is not None:
         state["environments"] = contents.environments
@@ -228,6 +231,7 @@ def load_checkpoint(directory: Path, device: str | torch.device = "cpu", resumab
             rng=state_from_json(state["rng"]),
             wall_time=float(state["wall_time"]),
             extra=state["extra"],
+            clock=state.get("clock", {}),
             buffer=_reading(directory / BUFFER_FILE, _read_buffer) if resumable else None,
             partials=_reading(directory / PARTIAL_FILE, _read_partials) if resumable else None,
             environments=state["environments"] if resumable else None,

@@ -18,6 +18,7 @@ kill or a damaged checkpoint, :mod:`lanrocli.train.recovery`'s.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -231,6 +232,7 @@ class CurriculumRun:
                 evaluations=state.evaluations,
                 rule_value=value,
                 wall_time=trainer.wall_time(),
+                clock=trainer.clock.to_dict(),
             )
             state.results.append(result)
             stop = not holds and stage.on_budget == "stop"
@@ -255,9 +257,11 @@ class CurriculumRun:
         folder = self.out / stage_folder(result.index, stage.name)
         final = self.state.finished and result is self.state.results[-1]
         splits = self.trainer.settings.holdout.splits
+        started = time.perf_counter()
         record, figures = measure_stage(
             folder, self.curriculum.test.episodes, self.trainer.device, final, splits, should_stop
         )
+        result.test_seconds = round(time.perf_counter() - started, 1)
         write_json(folder / TEST, record)
         write_report(self.out, self.curriculum, self.state)
         self._tensorboard.test(result.end, figures)

@@ -10,6 +10,7 @@ from typing import Any
 
 from lanrocli.choices import Kind
 from lanrocli.envs.figures import ATTENTION, FIGURES, JUDGED, PHASES
+from lanrocli.train.clock import RATES
 from lanrocli.train.curriculum import Curriculum
 from lanrocli.train.generalisation import split_lines, with_interval
 from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, REPORT, SPLITS, TEST, stage_folder
@@ -50,8 +51,9 @@ def _stage_lines(curriculum: Curriculum, state: RunState) -> list[str]:
     lines = [
         "## Stages",
         "",
-        "| stage | rule | steps | ended | evaluations | rule's value at the end | wall time |",
-        "|---|---|---|---|---|---|---|",
+        "| stage | rule | steps | ended | evaluations | rule's value at the end | wall time | steps/s collecting "
+        "| updates/s | steps/s evaluating | tests |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for result in state.results:
         stage = curriculum.stages[result.index]
@@ -62,13 +64,19 @@ def _stage_lines(curriculum: Curriculum, state: RunState) -> list[str]:
         lines.append(
             f"| {result.index + 1}. {result.name} | {rule} | {result.end - result.start:,} of "
             f"{stage.budget.steps:,} | {result.ended} | {result.evaluations} | {_percent(result.rule_value)} | "
-            f"{result.wall_time / 60:.1f} min |"
+            f"{result.wall_time / 60:.1f} min | {_speeds(state.rates(result), result.test_seconds)} |"
         )
     total = state.results[-1].end if state.results else 0
     status = FINISHED if state.finished else "running"
     if state.stopped_early:
         status = STOPPED_BY_BUDGET
     return lines + ["", f"{STATUS}{status}. {total:,} environment steps in all. (Wall time is cumulative.)"]
+
+
+def _speeds(rates: dict[str, float | None] | None, test_seconds: float | None) -> str:
+    """The stage's rate in each phase and its tests' minutes, as table cells ("-" where not known)."""
+    cells = [f"{rates[phase]:,.0f}" if rates and rates.get(phase) is not None else "-" for phase in RATES]
+    return " | ".join([*cells, "-" if test_seconds is None else f"{test_seconds / 60:.1f} min"])
 
 
 def run_ended(out: Path) -> bool:

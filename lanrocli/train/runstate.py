@@ -8,6 +8,7 @@ from typing import Any
 
 from lanrocli.envs.evaluation import EvaluationReport
 from lanrocli.envs.figures import Rate, wilson_interval
+from lanrocli.train.clock import PhaseClock
 from lanrocli.train.sections import Promote, Stage
 
 
@@ -25,6 +26,10 @@ class StageResult:
     rule_value: float | None
     """What the promotion rule saw at the stage's last evaluation (pooled); None without a rule."""
     wall_time: float
+    clock: dict[str, Any] | None = None
+    """The run's ``PhaseClock`` at the stage's end (not kept by runs written before it was)."""
+    test_seconds: float | None = None
+    """How long the stage's tests took, once they have run."""
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> StageResult:
@@ -51,6 +56,16 @@ class RunState:
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+    def rates(self, result: StageResult) -> dict[str, float | None] | None:
+        """Steps or updates per second of each phase during ``result``'s stage (``PhaseClock.rates``); None
+        where the clock was not kept at its end or the previous stage's."""
+        position = self.results.index(result)
+        previous = self.results[position - 1].clock if position > 0 else {}
+        if result.clock is None or previous is None:
+            return None
+        spent = PhaseClock.from_dict(result.clock).since(PhaseClock.from_dict(previous))
+        return spent.rates(result.end - result.start)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RunState:

@@ -22,13 +22,14 @@ import torch
 
 from lanrocli.choices import CorrectionForm, Instruction, Kind, Split
 from lanrocli.envs.env import LanroEnv
-from lanrocli.envs.evaluation import EvaluationReport, evaluate
+from lanrocli.envs.evaluation import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.language.vocabulary import unlearned_words
 from lanrocli.train.checkpoint import resolve_checkpoint
 from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, SPLITS
 from lanrocli.train.seeds import correction_test_seed, held_out_seed, split_test_seed
-from lanrocli.train.trainer import AgentPolicy, TrainSettings, load_policy
+from lanrocli.train.agent_policy import AgentPolicy
+from lanrocli.train.trainer import TrainSettings, load_policy
 
 CORRECTION_TEST_NEGATION_RATE = 0.5
 """Share of the correction test's spoken corrections that are negations, where the stage allows them."""
@@ -121,19 +122,23 @@ def _run(
     enough: Callable[[EvaluationReport], bool] | None = None,
 ) -> EvaluationReport:
     settings = loaded.settings
-    env = LanroEnv(
-        settings.task,
-        loaded.env,
-        object_slots=settings.slots,
-        render_mode="rgb_array" if gif else None,
-        vocabulary=loaded.policy.vocabulary,
-        holdout=settings.holdout,
-        split=loaded.split,
-    )
+    envs = [
+        LanroEnv(
+            settings.task,
+            loaded.env,
+            object_slots=settings.slots,
+            render_mode="rgb_array" if gif else None,
+            vocabulary=loaded.policy.vocabulary,
+            holdout=settings.holdout,
+            split=loaded.split,
+        )
+        for _ in range(SIDE_BY_SIDE)
+    ]
     try:
-        return evaluate(env, loaded.policy, episodes, first, gif, progress, instruction, enough)
+        return evaluate(envs, loaded.policy, episodes, first, gif, progress, instruction, enough)
     finally:
-        env.close()
+        for env in envs:
+            env.close()
 
 
 def _record(

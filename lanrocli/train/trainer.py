@@ -26,12 +26,14 @@ from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.choices import Task, check_device
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
-from lanrocli.envs.evaluation import EvaluationReport, evaluate
+from lanrocli.envs.evaluation import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.tasks import make_task
 from lanrocli.language import Vocabulary, agent_vocabulary, grammar_vocabulary
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
+from lanrocli.train.agent_policy import AgentPolicy
 from lanrocli.train.checkpoint import Checkpoint, load_checkpoint, resolve_checkpoint, save_checkpoint
+from lanrocli.train.clock import PhaseClock
 from lanrocli.train.collect import Collector
 from lanrocli.train.errors import CheckpointError
 
@@ -136,26 +138,6 @@ def pick_device(requested: str | None) -> torch.device:
     return device
 
 
-class AgentPolicy:
-    """The agent's deterministic policy in the scripted-policy interface, for evaluation, with the
-    vocabulary it reads: the environments it acts in must encode their sentences with it."""
-
-    def __init__(self, agent: SACAgent, vocabulary: Vocabulary) -> None:
-        self.agent = agent
-        self.vocabulary = vocabulary
-
-    def reset(self, seed: int | None = None) -> None:
-        pass
-
-    def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> np.ndarray:
-        return self.agent.act(observation, deterministic=True)
-
-    def attention(self, observation: dict[str, np.ndarray]) -> np.ndarray | None:
-        """The actor's attention over the object slots for one observation, which evaluation reads to tell
-        how much of it lies on the goal; None for a flat agent."""
-        return self.agent.attention(observation)
-
-
 def load_policy(path: Path, device: str | torch.device = "cpu") -> tuple[TrainSettings, AgentPolicy]:
     """The settings a checkpoint was trained with and its deterministic policy; ``path`` is a checkpoint,
     a pointer file or a run folder. Raises CheckpointError, ValueError or KeyError on a bad checkpoint."""
@@ -216,9 +198,11 @@ class Trainer:
         self.progress = Progress()
         self.last_metrics: dict[str, float] = {}
         self._collector: Collector | None = None
+        self._evaluation_envs: list[LanroEnv] = []
         self._restore: tuple[list[dict[str, Any]], list[dict[str, np.ndarray]]] | None = None
         self._started = time.perf_counter()
         self._wall_before = 0.0
+        self.clock = PhaseClock()
 
     def env_factory(self, evaluation: bool = False) -> Callable[[], LanroEnv]:
         """Builds environments of the current stage, observed through the run's object slots. A plain
@@ -255,12 +239,17 @@ class Trainer:
         while self.progress.env_steps < until:
             if should_stop():
                 return False
+            step_started = time.perf_counter()
             actions = self.agent.act(collector.observation)
             collector.step_async(actions)
             n = updates_due(self.progress.env_steps, s.envs, s.updates_per_step)
             if self.buffer.size >= max(s.learning_starts, 1) and n > 0:
+                learn_started = time.perf_counter()
                 self.last_metrics = self.agent.learn(self.buffer, self.rng, n, s.buffer)
                 self.progress.updates += n
+                self.clock.update_s += time.perf_counter() - learn_started
+                self.clock.updates += n
+                step_started += time.perf_counter() - learn_started  # the rest of the step is collection
             for episode in collector.step_wait():
                 self.buffer.add_episode(episode.data)
                 self.agent.update_normalizer(episode.data.observations)
@@ -268,6 +257,7 @@ class Trainer:
                 self.progress.train_successes.append(episode.success)
                 del self.progress.train_successes[:-SUCCESS_WINDOW]
             self.progress.env_steps += s.envs
+            self.clock.collection_s += time.perf_counter() - step_started
             if on_step is not None:
                 on_step(self)
         return True
@@ -283,12 +273,16 @@ class Trainer:
         return self._collector
 
     def evaluate(self, first_seed: int, episodes: int | None = None) -> EvaluationReport:
-        """The deterministic policy on evaluation episodes; episode i is reset with ``first_seed + i``."""
-        env = self.env_factory(evaluation=True)()
-        try:
-            return evaluate(env, AgentPolicy(self.agent, self.vocabulary), episodes or self.settings.eval_episodes, first_seed)
-        finally:
-            env.close()
+        """The deterministic policy on evaluation episodes; episode i is reset with ``first_seed + i``. The
+        environments are built once per stage: building one costs as much as a few episodes."""
+        if not self._evaluation_envs:
+            self._evaluation_envs = [self.env_factory(evaluation=True)() for _ in range(SIDE_BY_SIDE)]
+        started = time.perf_counter()
+        policy = AgentPolicy(self.agent, self.vocabulary)
+        report = evaluate(self._evaluation_envs, policy, episodes or self.settings.eval_episodes, first_seed)
+        self.clock.evaluation_s += time.perf_counter() - started
+        self.clock.evaluation_steps += sum(result.length for result in report.results)
+        return report
 
     @property
     def train_success(self) -> float | None:
@@ -314,6 +308,7 @@ class Trainer:
             rng=self.rng.bit_generator.state,
             wall_time=self.wall_time(),
             extra=dict(extra or {}),
+            clock=self.clock.to_dict(),
         )
         if resumable:
             collector = self._ensure_collector()
@@ -336,6 +331,7 @@ class Trainer:
         trainer.progress = Progress(**contents.progress)
         trainer.rng.bit_generator.state = contents.rng
         trainer._wall_before = contents.wall_time
+        trainer.clock = PhaseClock.from_dict(contents.clock)
         trainer._restore = (contents.environments, contents.partials)
         return trainer, contents.extra
 
@@ -343,3 +339,6 @@ class Trainer:
         if self._collector is not None:
             self._collector.close()
             self._collector = None
+        for env in self._evaluation_envs:
+            env.close()
+        self._evaluation_envs = []

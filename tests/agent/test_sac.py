@@ -96,6 +96,23 @@ def _attention_on_named(agent: SACAgent, batch: Batch) -> list[float]:
     return weights
 
 
+@pytest.mark.parametrize("architecture", ["flat", "objects"])
+def test_act_and_attend_answers_a_batch_as_act_and_attention_answer_each_row(architecture: str) -> None:
+    agent = _agent(architecture=architecture)
+    rng = np.random.default_rng(5)
+    agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
+    agent.update(_batch(rng))
+    obs = {"observation": rng.normal(size=(6, OBS_DIM)).astype(np.float32), "instruction": np.stack([RED, BLUE] * 3)}
+    actions, weights = agent.act_and_attend(obs)
+    rows = [{key: value[i] for key, value in obs.items()} for i in range(6)]
+    np.testing.assert_allclose(actions, np.stack([agent.act(row, deterministic=True) for row in rows]), atol=1e-6)
+    if architecture == "flat":
+        assert weights is None and agent.attention(rows[0]) is None
+    else:
+        assert weights is not None
+        np.testing.assert_allclose(weights, np.stack([agent.attention(row) for row in rows]), atol=1e-6)
+
+
 def test_grounding_loss_teaches_every_reader_which_object_a_sentence_names() -> None:
     rng = np.random.default_rng(0)
     agent = _agent(critics=2, architecture="objects")
@@ -264,7 +281,7 @@ def test_state_survives_weights_only_load_and_resumes_bit_identically(
     agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
     for _ in range(3):
         agent.update(_batch(rng))
-    with caplog.at_level(logging.WARNING, logger="lanrocli.agent.sac"):
+    with caplog.at_level(logging.WARNING, logger="lanrocli.agent.noise"):
         resumed = SACAgent.from_state_dict(_round_trip(agent.state_dict()))
     assert not caplog.records, "a state saved on this device type continues its noise stream, silently"
     assert resumed.settings == agent.settings and resumed.updates == agent.updates
@@ -295,7 +312,7 @@ def test_a_state_from_another_device_type_loads_with_a_derived_noise_stream(capl
     # What a CUDA generator saves: a seed and an offset, 16 bytes where a CPU generator keeps thousands.
     state["generator"] = torch.tensor([7, *[0] * 7, 32, *[0] * 7], dtype=torch.uint8)
     state["generator_device"] = "cuda"
-    with caplog.at_level(logging.WARNING, logger="lanrocli.agent.sac"):
+    with caplog.at_level(logging.WARNING, logger="lanrocli.agent.noise"):
         first, second = (SACAgent.from_state_dict(_round_trip(state)) for _ in range(2))
     assert [r.levelno for r in caplog.records] == [logging.WARNING] * 2
     message = caplog.records[0].getMessage()
@@ -319,7 +336,7 @@ def test_states_that_do_not_record_their_device_type_are_judged_by_their_generat
     agent.update(_batch(np.random.default_rng(0)))
     state = agent.state_dict()
     del state["generator_device"], state["seed"]
-    with caplog.at_level(logging.WARNING, logger="lanrocli.agent.sac"):
+    with caplog.at_level(logging.WARNING, logger="lanrocli.agent.noise"):
         same = SACAgent.from_state_dict(_round_trip(state))
         assert not caplog.records
         state["generator"] = torch.zeros(16, dtype=torch.uint8)

@@ -26,7 +26,8 @@ from lanrocli.train.testset import (
     correction_test,
     measure,
 )
-from lanrocli.train.trainer import AgentPolicy, Trainer, TrainSettings
+from lanrocli.train.agent_policy import AgentPolicy
+from lanrocli.train.trainer import Trainer, TrainSettings
 
 STAGE = EnvSettings(objects=2, correction_rate=0.5, negations=True, max_episode_steps=8)
 
