@@ -1,4 +1,4 @@
-"""The tasks lanro knows: an explicit registry of task classes, from which every list of tasks is read.
+"""The tasks lanro knows: the registry of task classes, from which every list of tasks is read.
 
 The registry keeps the order of registration, which is part of the data: a replay buffer stores each
 episode's task as its index here, so the built-in tasks keep their places and a new one comes after them.
@@ -11,34 +11,33 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from typing import overload
 
+from lanrocli.registry import Registry
 from lanrocli.tasks.base import TaskDefinition
-
-_classes: dict[str, type[TaskDefinition]] = {}
 
 REQUIRED = ("name", "gym_id", "verbs")
 """The class attributes a task must set; the rest have defaults in ``TaskDefinition``."""
 
+_TASK_CLASSES: Registry[type[TaskDefinition]] = Registry("task", lambda cls: cls.name)
+
 
 def register(cls: type[TaskDefinition]) -> type[TaskDefinition]:
-    """Add a task class under its ``name``; a name or gymnasium id already taken is refused."""
+    """Add a task class under its ``name``; a class without a name, id or verbs, or whose name or gymnasium
+    id is taken, is refused."""
     missing = [attribute for attribute in REQUIRED if not hasattr(cls, attribute)]
     if missing:
         raise TypeError(f"task class {cls.__name__} does not set {', '.join(missing)}")
     if not cls.verbs:
         raise TypeError(f"task class {cls.__name__} has no verbs: the instructor could not name it")
-    for known in _classes.values():
-        if cls.name == known.name or cls.gym_id == known.gym_id:
-            raise ValueError(f"task {cls.name!r} ({cls.gym_id}) clashes with {known.name!r} ({known.gym_id})")
-    _classes[cls.name] = cls
-    return cls
+    for known in _TASK_CLASSES:
+        if cls.gym_id == known.gym_id and cls.name != known.name:
+            raise ValueError(f"task {cls.name!r} has the gymnasium id {cls.gym_id} of task {known.name!r}")
+    return _TASK_CLASSES.register(cls)
 
 
 def unregister(name: str) -> None:
-    """Remove the task ``name``; what was registered before it keeps its place."""
-    task_class(name)
-    del _classes[name]
+    """Remove the task ``name``; the tasks registered before and after it keep their order."""
+    _TASK_CLASSES.unregister(name)
 
 
 @contextmanager
@@ -53,9 +52,7 @@ def registered(cls: type[TaskDefinition]) -> Iterator[type[TaskDefinition]]:
 
 def task_class(name: str) -> type[TaskDefinition]:
     """The class of task ``name``, or a ``ValueError`` that lists the known tasks."""
-    if name not in _classes:
-        raise ValueError(f"task must be one of {list(_classes)}, got {name!r}")
-    return _classes[name]
+    return _TASK_CLASSES.named(name)
 
 
 def make_task(name: str) -> TaskDefinition:
@@ -65,44 +62,25 @@ def make_task(name: str) -> TaskDefinition:
 
 def check_task(task: str) -> str:
     """Return ``task`` if it is a known task, else raise a ``ValueError`` that lists the known ones."""
-    if task not in _classes:
-        raise ValueError(f"unknown task {task!r}; expected one of {', '.join(_classes)}")
+    if task not in TASKS:
+        raise ValueError(f"unknown task {task!r}; expected one of {', '.join(TASKS)}")
     return task
-
-
-class _Names(Sequence[str]):
-    """The registered tasks' names, in registration order."""
-
-    @overload
-    def __getitem__(self, index: int) -> str: ...
-
-    @overload
-    def __getitem__(self, index: slice) -> Sequence[str]: ...
-
-    def __getitem__(self, index: int | slice) -> str | Sequence[str]:
-        return tuple(_classes)[index]
-
-    def __len__(self) -> int:
-        return len(_classes)
-
-    def __repr__(self) -> str:
-        return repr(tuple(_classes))
 
 
 class _Verbs(Mapping[str, tuple[str, ...]]):
     """Each registered task's verbs, by name."""
 
     def __getitem__(self, name: str) -> tuple[str, ...]:
-        return _classes[name].verbs
+        return _TASK_CLASSES.by_name[name].verbs
 
     def __iter__(self) -> Iterator[str]:
-        return iter(tuple(_classes))
+        return iter(TASKS)
 
     def __len__(self) -> int:
-        return len(_classes)
+        return len(_TASK_CLASSES)
 
 
-TASKS: Sequence[str] = _Names()
+TASKS: Sequence[str] = _TASK_CLASSES.names
 """The names of the registered tasks, in registration order."""
 
 TASK_VERBS: Mapping[str, tuple[str, ...]] = _Verbs()
