@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from typing import Any, Generic, TypeVar, overload
+from typing import TypeVar, overload
 
 T = TypeVar("T")
 
@@ -49,7 +49,7 @@ class Live(Sequence[T]):
         return repr(self._compute())
 
 
-class Registry(Sequence[T], Generic[T]):
+class Registry(Sequence[T]):
     """The entries of one kind (``what``), in registration order, each under the name ``name_of`` gives it."""
 
     def __init__(self, what: str, name_of: Callable[[T], str]) -> None:
@@ -58,7 +58,7 @@ class Registry(Sequence[T], Generic[T]):
         self._entries: dict[str, T] = {}
         self.names: Live[str] = Live(lambda: tuple(self._entries))
         """The entries' names, in order."""
-        self.by_name: Mapping[str, T] = _ByName(self._entries)
+        self.by_name: Mapping[str, T] = _ByName[T](self._entries)
         """The entries by name."""
 
     @overload
@@ -72,6 +72,9 @@ class Registry(Sequence[T], Generic[T]):
 
     def __len__(self) -> int:
         return len(self._entries)
+
+    def __iter__(self) -> Iterator[T]:
+        return iter(tuple(self._entries.values()))
 
     def named(self, name: str) -> T:
         """The entry ``name``, or a ``ValueError`` that lists the names known."""
@@ -102,13 +105,13 @@ class Registry(Sequence[T], Generic[T]):
             self.unregister(self._name_of(entry))
 
 
-class _ByName(Mapping[str, Any]):
+class _ByName(Mapping[str, T]):
     """A registry's entries by name, read through as they change."""
 
-    def __init__(self, entries: dict[str, Any]) -> None:
+    def __init__(self, entries: dict[str, T]) -> None:
         self._entries = entries
 
-    def __getitem__(self, name: str) -> Any:
+    def __getitem__(self, name: str) -> T:
         return self._entries[name]
 
     def __iter__(self) -> Iterator[str]:

@@ -1,8 +1,8 @@
 """The tasks: one class each (``lanrocli.tasks.base.TaskDefinition``), and the registry every list of tasks
 is read from: the curriculum's and the command line's choices, the gymnasium ids, the instructor's verbs.
 
-The built-in tasks are registered here, in the order whose indices replay buffers store: a new built-in
-task is one module, its class added at the end of ``BUILT_IN``, and a curriculum file.
+The built-in tasks are registered here, in the order whose indices replay buffers store, so a new built-in
+task's class goes at the end of ``BUILT_IN`` (docs/architecture.md, "add a task").
 """
 
 from lanrocli.tasks.base import ArmView, OracleMemory, TaskDefinition, TaskView
