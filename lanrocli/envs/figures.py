@@ -2,9 +2,9 @@
 tool reports.
 
 Every success rate reported is one ``Figure`` of the registry ``FIGURES``: the columns of ``metrics.csv``,
-``EvaluationReport.metrics``, TensorBoard, the tables and ``lanro report`` are all generated from it. A new
-figure is one entry: ``FIGURES.register(Figure(...))`` (for a while: ``with FIGURES.registered(...)``), and
-every name derived below is read from the registry each time, so it follows.
+``EvaluationReport.metrics`` and TensorBoard's figures are generated from it, and the tables and ``lanro
+report`` read their figures through it. A new figure is one entry: ``FIGURES.register(Figure(...))`` (for a
+while: ``with FIGURES.registered(...)``); every name derived below is read from the registry each time.
 """
 
 from __future__ import annotations
