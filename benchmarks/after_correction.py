@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from lanrocli.envs.env import FALLEN, LanroEnv
-from lanrocli.envs.tasks import REACH_STILL
+from lanrocli.tasks.reach import REACH_STILL
 from lanrocli.train.agent_policy import AgentPolicy
 from lanrocli.train.trainer import load_policy
 

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import argparse
 
-from lanrocli.choices import Task
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.policies import RandomPolicy
+from lanrocli.tasks import task_class
 
 STARTS = {
     "neutral": {},
@@ -65,7 +65,7 @@ def main() -> None:
     print(f"{'task':6} {'start':13} {'achieving':>9} {'both fingers':>12} {'achieved steps':>14}")
     for task in args.tasks:
         for start in args.starts:
-            if start == "object_start" and not Task(task).gripper:
+            if start == "object_start" and not task_class(task).gripper:
                 continue  # the fingers stay closed: there is no hand to open around an object
             result = measure(task, start, args.episodes, args.objects, args.steps)
             print(

@@ -2,8 +2,9 @@
 the devices lanro runs on.
 
 One enum each, read alike by the environment, the curriculum schema (pydantic), the command line (typer)
-and the reports, so a new value is added here once. Each is a ``StrEnum``: its members are their values as
-strings (equal, hashed, printed and written to JSON as them), which is what files and the command line carry.
+and the reports, so a new value is added here once; the task names alone come from the task classes of
+``lanrocli.tasks``. Each is a ``StrEnum``: its members are their values as strings (equal, hashed, printed
+and written to JSON as them), which is what files and the command line carry.
 """
 
 from __future__ import annotations
@@ -12,19 +13,12 @@ import re
 import warnings
 from enum import StrEnum
 
+from lanrocli.tasks import TASKS
 
-class Task(StrEnum):
-    """What the arm must do to the goal object."""
-
-    REACH = "reach"
-    PUSH = "push"
-    GRASP = "grasp"
-    LIFT = "lift"
-
-    @property
-    def gripper(self) -> bool:
-        """Whether the arm uses its fingers: the action gains a fourth number, the finger opening."""
-        return self in (Task.GRASP, Task.LIFT)
+Task = StrEnum("Task", [(name.upper(), name) for name in TASKS], module=__name__)
+"""The names of the tasks registered in ``lanrocli.tasks`` when this module loads (the built-in ones), in
+their order: what the curriculum schema (pydantic) and the command line (typer) accept. What a task is and
+does belongs to its class, ``lanrocli.tasks.task_class(name)``."""
 
 
 class Mode(StrEnum):

@@ -46,11 +46,11 @@ from lanrocli.envs.caption import caption
 from lanrocli.envs.env import FALLEN, IMAGE_SIZE, LanroEnv
 from lanrocli.envs.evaluation import save_gif
 from lanrocli.envs.settings import CORRECTION_LIMIT, EnvSettings
-from lanrocli.envs.tasks import make_task
 from lanrocli.language import TASK_VERBS, ObjectProps
 from lanrocli.language.typed import Grammar, Utterance, unknown_words, words_of
 from lanrocli.language.vocabulary import UNK
-from lanrocli.sim import CONTROL_DT
+from lanrocli.sim import CONTROL_DT, action_size
+from lanrocli.tasks import task_class
 from lanrocli.train.errors import CheckpointError
 from lanrocli.train.pretrained import agent_path
 from lanrocli.train.agent_policy import AgentPolicy
@@ -160,7 +160,7 @@ def load_agent(path: Path, options: PlayOptions) -> tuple[str, EnvSettings, int,
     except (CheckpointError, KeyError, TypeError, ValueError) as error:
         raise PlayError(f"cannot load a trained agent from {path}: {error}") from None
     task = options.task or settings.task
-    trained, asked = make_task(settings.task).action_size, make_task(task).action_size
+    trained, asked = (action_size(task_class(name).gripper) for name in (settings.task, task))
     if trained != asked:
         raise PlayError(f"{path} was trained on {settings.task} ({trained} actions); {task} needs {asked} actions")
     try:

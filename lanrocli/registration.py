@@ -1,4 +1,4 @@
-"""The gymnasium ids of the four tasks, registered whenever ``lanrocli`` is imported.
+"""The gymnasium ids of the tasks, registered whenever ``lanrocli`` is imported.
 
 Registration names the environment class by an import string, so it loads neither pybullet nor the
 environment module: they load when an environment is made. ``import lanrocli`` therefore stays cheap
@@ -19,25 +19,24 @@ from __future__ import annotations
 from gymnasium.envs.registration import register, registry
 
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.tasks import TASKS, task_class
 
-ENV_IDS: dict[str, str] = {
-    "reach": "lanro/Reach-v0",
-    "push": "lanro/Push-v0",
-    "grasp": "lanro/Grasp-v0",
-    "lift": "lanro/Lift-v0",
-}
-"""The gymnasium id of each task."""
+ENV_IDS: dict[str, str] = {name: task_class(name).gym_id for name in TASKS}
+"""The gymnasium id of each task registered when lanrocli is imported (the built-in ones), as each task's
+class gives it."""
 
 ENTRY_POINT = "lanrocli.envs.env:LanroEnv"
 
 
 def register_envs() -> None:
-    """Register every task's id that gymnasium does not know yet.
+    """Register the id of every task in ``lanrocli.tasks`` that gymnasium does not know yet.
 
     Ids already known are left alone, so running it again (a reload of the package, a caller that
-    registers explicitly) changes nothing and gives gymnasium no override to warn about.
+    registers explicitly, or one that registered a task of its own first) changes nothing and gives
+    gymnasium no override to warn about.
     """
-    for task, env_id in ENV_IDS.items():
+    for task in TASKS:
+        env_id = task_class(task).gym_id
         if env_id not in registry:
             register(
                 id=env_id,

@@ -11,7 +11,6 @@ from lanrocli.choices import Kind, Split
 from lanrocli.envs.instructor import Instructor
 from lanrocli.envs.scene import Scene, check_scenes, sample_scene
 from lanrocli.envs.settings import EnvSettings
-from lanrocli.envs.tasks import TaskView, make_task
 from lanrocli.language import COLOURS, SHAPES, Vocabulary, grammar_vocabulary, max_sentence_words
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.reward import reward
@@ -23,8 +22,10 @@ from lanrocli.sim import (
     ObjectSet,
     Panda,
     World,
+    action_size,
     resting_position,
 )
+from lanrocli.tasks import TaskView, make_task
 
 ARM_SIZE = 7
 """End-effector position (3), its linear velocity (3), finger width (1)."""
@@ -78,7 +79,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     redundant but not idle: what every task needs first is the offset from the hand to the named object.
 
     How far push must slide its object and how high lift must raise it are drawn per episode
-    (``lanrocli.envs.tasks``) and are not observed: the instruction names no distance, so the agent is not
+    (``lanrocli.tasks``) and are not observed: the instruction names no distance, so the agent is not
     told them and has to learn to go past the largest distance or height an episode may draw. For push and
     lift the reward is therefore not a function of the observation alone.
 
@@ -151,7 +152,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 ),
             }
         )
-        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.task.action_size,), dtype=np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(action_size(self.task.gripper),), dtype=np.float32)
 
         self.world = World(gui=gui)
         self.robot = Panda(self.world, gripper=self.task.gripper)

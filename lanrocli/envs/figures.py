@@ -2,7 +2,9 @@
 tool reports.
 
 Every success rate reported is one ``Figure`` of the registry ``FIGURES``: the columns of ``metrics.csv``,
-``EvaluationReport.metrics``, the tables and ``lanro report`` are all generated from it.
+``EvaluationReport.metrics`` and TensorBoard's figures are generated from it, and the tables and ``lanro
+report`` read their figures through it. A new figure is one entry: ``FIGURES.register(Figure(...))`` (for a
+while: ``with FIGURES.registered(...)``); every name derived below is read from the registry each time.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from typing import Any
 
 from lanrocli.choices import CorrectionForm, Kind
 from lanrocli.envs.instructor import MAX_CORRECTIONS
+from lanrocli.registry import Live, Registry
 
 JUDGED = 30
 """Spoken corrections of one kind or form below which its success is shown but not judged: with fewer, its
@@ -177,7 +180,10 @@ def _form_figure(form: CorrectionForm) -> Figure:
     )
 
 
-FIGURES: tuple[Figure, ...] = (
+FIGURES: Registry[Figure] = Registry("figure", lambda figure: figure.name)
+"""The registry of the success rates every tool reports, in the order the tools show them."""
+
+for _figure in (
     Figure("success", "episodes", "success", lambda r: True, ()),
     Figure(
         "correction_episode_success",
@@ -191,13 +197,16 @@ FIGURES: tuple[Figure, ...] = (
     *(figure for kind in Kind for figure in _kind_figures(kind)),
     *(_form_figure(form) for form in CorrectionForm),
     *(_index_figure(index) for index in range(2, MAX_CORRECTIONS + 1)),
-)
-"""The registry of the success rates every tool reports."""
+):
+    FIGURES.register(_figure)
 
-FIGURE = {figure.name: figure for figure in FIGURES}
+FIGURE = FIGURES.by_name
+"""Each registered figure by its name."""
 
-METRIC_NAMES = (
-    *(name for figure in FIGURES for name in (figure.count, figure.name)),
-    *(f"{ATTENTION}_{phase}" for phase in PHASES),
+METRIC_NAMES: Live[str] = Live(
+    lambda: (
+        *(name for figure in FIGURES for name in (figure.count, figure.name)),
+        *(f"{ATTENTION}_{phase}" for phase in PHASES),
+    )
 )
 """The flat metrics of one evaluation (``EvaluationReport.metrics``), as ``metrics.csv`` names its columns."""

@@ -12,8 +12,9 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-from lanrocli.choices import Kind, Mode, Task
+from lanrocli.choices import Kind, Mode
 from lanrocli.envs.instructor import InstructorSettings
+from lanrocli.tasks import TASKS, task_class
 
 PLAIN_LIMIT = 50
 """Steps of an episode without corrections."""
@@ -117,12 +118,13 @@ class EnvSettings:
         object starts are for training), so success is comparable across runs and curricula."""
         return dataclasses.replace(self, random_start=0.0, object_start=0.0)
 
-    def check_task(self, task: Task) -> None:
+    def check_task(self, task: str) -> None:
         """The settings that only some tasks accept: object starts need a gripper to open."""
-        if self.object_start > 0.0 and not task.gripper:
+        if self.object_start > 0.0 and not task_class(task).gripper:
+            grippers = " or ".join(name for name in TASKS if task_class(name).gripper)
             raise ValueError(
-                f"object_start is {self.object_start:g}, but it needs a task with a gripper (grasp or lift): "
-                f"{task.value} keeps its fingers closed; leave object_start at 0"
+                f"object_start is {self.object_start:g}, but it needs a task with a gripper ({grippers}): "
+                f"{task} keeps its fingers closed; leave object_start at 0"
             )
 
     def replace(self, **changes: Any) -> EnvSettings:

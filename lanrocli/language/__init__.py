@@ -1,4 +1,6 @@
 """The instructor's language: object properties, the grammar of instructions and corrections, the vocabulary.
+The tasks' names and verbs are read from the task classes (``lanrocli.tasks``) and offered here beside the
+words they join.
 
 Pure Python and numpy: nothing here knows of physics or torch.
 """
@@ -31,10 +33,7 @@ from lanrocli.language.properties import (
     RARE_WORD_COLOURS,
     SHAPE_WORDS,
     SHAPES,
-    TASK_VERBS,
-    TASKS,
     ObjectProps,
-    check_task,
 )
 from lanrocli.language.vocabulary import (
     PAD_ID,
@@ -44,6 +43,7 @@ from lanrocli.language.vocabulary import (
     agent_vocabulary,
     grammar_vocabulary,
 )
+from lanrocli.tasks import TASK_VERBS, TASKS, check_task
 
 __all__ = [
     "BEGINNING_WORDS",

@@ -28,10 +28,9 @@ from lanrocli.language.properties import (
     RARE_COLOUR_WORDS,
     SHAPE_WORDS,
     SHAPES,
-    TASK_VERBS,
     ObjectProps,
-    check_task,
 )
+from lanrocli.tasks import TASK_VERBS, check_task
 
 ARTICLE = "the"
 OBJECT_WORD = "object"

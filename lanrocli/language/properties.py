@@ -1,6 +1,6 @@
-"""The objects' properties and the task verbs: the words the instructor may use for each.
+"""The objects' properties: the words the instructor may use for each (a task's verbs are its class's).
 
-Canonical names (``"red"``, ``"cuboid"``, ``"push"``) identify a property everywhere in the code; the
+Canonical names (``"red"``, ``"cuboid"``) identify a property everywhere in the code; the
 words are only what the instructor says. Keeping both apart lets the instructor vary its wording
 (synonyms, rare words) while tasks, scenes and relabelling reason about canonical properties.
 """
@@ -8,8 +8,6 @@ words are only what the instructor says. Keeping both apart lets the instructor 
 from __future__ import annotations
 
 from dataclasses import dataclass
-
-from lanrocli.choices import Task
 
 COLOURS: tuple[str, ...] = ("red", "green", "blue", "yellow", "purple", "orange", "pink", "cyan", "brown")
 
@@ -44,15 +42,6 @@ SHAPE_WORDS: dict[str, tuple[str, ...]] = {
 WORD_SHAPES: dict[str, str] = {word: shape for shape, words in SHAPE_WORDS.items() for word in words}
 """Each shape word to the shape it names."""
 
-TASKS: tuple[str, ...] = tuple(task.value for task in Task)
-
-TASK_VERBS: dict[str, tuple[str, ...]] = {
-    "reach": ("reach", "touch", "contact"),
-    "push": ("push", "move", "shift"),
-    "grasp": ("grasp", "grip", "grab"),
-    "lift": ("lift", "raise", "hoist"),
-}
-
 
 @dataclass(frozen=True, order=True)
 class ObjectProps:
@@ -79,10 +68,3 @@ class ObjectProps:
     def shared_properties(self, other: ObjectProps) -> int:
         """How many properties (0, 1 or 2) this object has in common with ``other``."""
         return int(self.colour == other.colour) + int(self.shape == other.shape)
-
-
-def check_task(task: str) -> str:
-    """Return ``task`` if it is a known task, else raise a ``ValueError`` that lists the known ones."""
-    if task not in TASKS:
-        raise ValueError(f"unknown task {task!r}; expected one of {', '.join(TASKS)}")
-    return task

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from lanrocli.language.grammar import grammar_words, max_sentence_words
+from lanrocli.tasks import TASK_VERBS
 
 PAD = "<pad>"
 UNK = "<unk>"
@@ -121,10 +122,16 @@ def stable_order(words: Iterable[str], listed: Sequence[str]) -> list[str]:
     return list(listed) + sorted(set(words) - known)
 
 
-@cache
 def grammar_vocabulary(corrections: int = 1) -> Vocabulary:
     """The vocabulary of every word any stage may speak, in stable id order, with L from the grammar for
     sentences of up to ``corrections`` corrections."""
+    return _grammar_vocabulary(corrections, tuple(TASK_VERBS.items()))
+
+
+@cache
+def _grammar_vocabulary(corrections: int, verbs: tuple[tuple[str, tuple[str, ...]], ...]) -> Vocabulary:
+    """Kept per set of registered tasks: a task registered for a while has its verbs in the vocabulary built
+    meanwhile, and the vocabulary of the tasks before it is the one built before, not one with its verbs."""
     return Vocabulary(stable_order(grammar_words(), listed_words()), max_sentence_words(corrections))
 
 

@@ -35,6 +35,7 @@ from typing import Any
 
 from lanrocli.agent.settings import UPDATE_METRICS
 from lanrocli.envs.figures import METRIC_NAMES
+from lanrocli.registry import Live
 from lanrocli.train.errors import CheckpointError
 from lanrocli.train.writing import fsync_dir, fsync_file, temporary
 
@@ -58,10 +59,13 @@ STAGE_FOLDER = re.compile(r"stage-\d+-.+")
 STEP_CHECKPOINT = re.compile(r"step-(\d+)")
 BEST_CHECKPOINT = re.compile(r"best-(\d+)")
 
-METRIC_COLUMNS = (
-    "stage", "stage_name", "env_steps", "stage_steps", "wall_time", *METRIC_NAMES, "mean_return", "mean_length",
-    "train_success", "rule_value", "rule_holds", *UPDATE_METRICS,
+METRIC_COLUMNS: Live[str] = Live(
+    lambda: (
+        "stage", "stage_name", "env_steps", "stage_steps", "wall_time", *METRIC_NAMES, "mean_return", "mean_length",
+        "train_success", "rule_value", "rule_holds", *UPDATE_METRICS,
+    )
 )
+"""The columns this version writes: read from the figures registered when a row is written."""
 
 
 # -- names -------------------------------------------------------------------------------------------------
@@ -153,7 +157,8 @@ def checkpoint_steps(directory: Path) -> int | None:
 def metric_columns(header: list[str]) -> list[str]:
     """The columns of a ``metrics.csv`` whose header is ``header``: this version's, then those that only an
     older version wrote (kept, so no figure of an older run is lost)."""
-    return [*METRIC_COLUMNS, *(column for column in header if column not in METRIC_COLUMNS)]
+    current = tuple(METRIC_COLUMNS)
+    return [*current, *(column for column in header if column not in current)]
 
 
 def _header(path: Path) -> list[str]:
@@ -195,7 +200,7 @@ def append_metrics(path: Path, row: dict[str, Any]) -> None:
     """Append an evaluation's row, first giving a file of an older version this version's columns."""
     align_metrics(path)
     new = not path.is_file() or path.stat().st_size == 0
-    header = METRIC_COLUMNS if new else _header(path)
+    header = list(METRIC_COLUMNS) if new else _header(path)
     with open(path, "a", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=header, restval="")
         if new:

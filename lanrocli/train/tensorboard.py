@@ -26,12 +26,13 @@ from pathlib import Path
 from typing import Any
 
 from lanrocli.envs.figures import METRIC_NAMES
+from lanrocli.registry import Live
 from lanrocli.train.curriculum import Curriculum
 from lanrocli.train.overrides import flatten
 
 TRAIN_POINTS = 5
 """Points of the ``train/`` group per evaluation interval: a curve between evaluations, not one per step."""
-EVALUATION_FIGURES = (*METRIC_NAMES, "mean_return", "mean_length", "rule_value")
+EVALUATION_FIGURES: Live[str] = Live(lambda: (*METRIC_NAMES, "mean_return", "mean_length", "rule_value"))
 """The columns of a ``metrics.csv`` row that describe the evaluation (the others are ``train/``'s)."""
 HPARAM_METRICS = ("test/last/success", "test/last/corrected_success", "eval/success")
 """The figures the HParams dashboard shows beside each run's settings."""

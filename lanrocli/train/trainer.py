@@ -28,9 +28,10 @@ from lanrocli.choices import Task, check_device
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
 from lanrocli.envs.evaluation import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
-from lanrocli.envs.tasks import make_task
 from lanrocli.language import Vocabulary, agent_vocabulary, grammar_vocabulary
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
+from lanrocli.sim import action_size
+from lanrocli.tasks import task_class
 from lanrocli.train.agent_policy import AgentPolicy
 from lanrocli.train.checkpoint import Checkpoint, load_checkpoint, resolve_checkpoint, save_checkpoint
 from lanrocli.train.clock import PhaseClock
@@ -179,7 +180,7 @@ class Trainer:
         self.device = torch.device(device)
         self.vocabulary = vocabulary if vocabulary is not None else grammar_vocabulary(settings.sentence_corrections)
         obs_dim = observation_size(settings.slots)
-        action_dim = make_task(settings.task).action_size
+        action_dim = action_size(task_class(settings.task).gripper)
         layout = ObjectLayout(ARM_SIZE, OBJECT_SIZE, settings.slots)
         self.agent = SACAgent(
             obs_dim, action_dim, len(self.vocabulary), agent_settings, settings.seed, self.device, layout

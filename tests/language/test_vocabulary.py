@@ -52,13 +52,13 @@ def test_every_word_of_the_grammar_has_its_line_in_the_word_ids_file() -> None:
 def test_a_word_added_to_the_grammar_takes_the_next_id_and_shifts_none(monkeypatch: pytest.MonkeyPatch) -> None:
     before = grammar_vocabulary()
     monkeypatch.setattr(vocabulary_module, "grammar_words", lambda: ["aardvark", *grammar_words(), "zebu"])
-    grammar_vocabulary.cache_clear()
+    vocabulary_module._grammar_vocabulary.cache_clear()
     try:
         after = grammar_vocabulary()
         assert after.words[: len(before)] == before.words
         assert after.words[len(before) :] == ("aardvark", "zebu")
     finally:
-        grammar_vocabulary.cache_clear()
+        vocabulary_module._grammar_vocabulary.cache_clear()
 
 
 def test_an_agent_reads_with_its_own_vocabulary_or_the_one_it_was_trained_with() -> None:

@@ -95,7 +95,7 @@ def test_the_ordinary_measure_keeps_the_stage_and_its_test_episodes(checkpoint: 
 def _extend_grammar(monkeypatch: pytest.MonkeyPatch, *words: str) -> None:
     original = vocabulary_module.grammar_words
     monkeypatch.setattr(vocabulary_module, "grammar_words", lambda: sorted([*original(), *words]))
-    vocabulary_module.grammar_vocabulary.cache_clear()
+    vocabulary_module._grammar_vocabulary.cache_clear()
 
 
 def test_a_checkpoint_evaluates_alike_after_the_grammar_gains_a_word(
@@ -114,7 +114,7 @@ def test_a_checkpoint_evaluates_alike_after_the_grammar_gains_a_word(
         misread = _run(dataclasses.replace(loaded, policy=policy), 3, before["episodes_from"]["first_seed"])
         assert misread.as_dict()[ATTENTION] != before[ATTENTION]
     finally:
-        vocabulary_module.grammar_vocabulary.cache_clear()
+        vocabulary_module._grammar_vocabulary.cache_clear()
 
 
 def test_a_checkpoint_that_stored_no_vocabulary_reads_with_the_one_it_was_trained_with(

@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lanrocli.envs.tasks import OFF_TABLE, REACH_STILL, Grasp, Lift, Push, Reach, TaskView, make_task
+from lanrocli.tasks import Grasp, Lift, Push, Reach, TaskView, make_task
+from lanrocli.tasks.grasp import OFF_TABLE
+from lanrocli.tasks.reach import REACH_STILL
 
 STARTS = np.array([[0.0, 0.0, 0.02], [0.1, 0.0, 0.02], [0.0, 0.1, 0.02]])
 
