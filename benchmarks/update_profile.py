@@ -1,0 +1,61 @@
+"""Where one SAC update's time goes: the agent of a curriculum (reach.yaml's by default, which every shipped
+curriculum inherits) collects ``--collect`` steps on reach with two objects, then ``--updates`` updates run
+under torch's profiler. Prints the update's mean time, how many tensor operations one update runs, and
+the operations that take the most time, so that a change to the update is judged by what it removes.
+
+    python benchmarks/update_profile.py --updates 200
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+import torch
+from torch.profiler import ProfilerActivity, profile
+
+from lanrocli.envs.settings import EnvSettings
+from lanrocli.train.curriculum import find_curriculum, load_curriculum
+from lanrocli.train.trainer import Trainer, TrainSettings
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--curriculum", default="reach", help="whose agent settings (a packaged name or a file)")
+    parser.add_argument("--collect", type=int, default=1500)
+    parser.add_argument("--updates", type=int, default=200)
+    parser.add_argument("--top", type=int, default=15)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+
+    curriculum = load_curriculum(find_curriculum(args.curriculum))
+    settings = TrainSettings(
+        task="reach", env=EnvSettings(objects=2), envs=2, learning_starts=args.collect + 1,
+        buffer=curriculum.buffer.settings(),
+    )
+    trainer = Trainer(settings, curriculum.agent.settings())
+    trainer.run(args.collect)
+    trainer.close()
+    agent, rng, sampling = trainer.agent, trainer.rng, settings.buffer.sampling()
+    batches = [
+        trainer.buffer.sample(agent.settings.batch_size, rng, **sampling, gamma=agent.settings.gamma)
+        for _ in range(args.updates)
+    ]
+    for batch in batches[:10]:  # warm-up
+        agent.update(batch)
+    start = time.perf_counter()
+    for batch in batches:
+        agent.update(batch)
+    seconds = (time.perf_counter() - start) / len(batches)
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        for batch in batches:
+            agent.update(batch)
+    events = prof.key_averages()
+    ops = sum(e.count for e in events if e.key.startswith("aten::"))
+    s = agent.settings
+    print(f"{args.curriculum}'s agent ({s.architecture}, critics {s.critics}, batch {s.batch_size}): "
+          f"{seconds * 1000:.2f} ms per update, {ops / len(batches):.0f} aten operations per update")
+    print(events.table(sort_by="self_cpu_time_total", row_limit=args.top))
+
+
+if __name__ == "__main__":
+    main()
