@@ -549,3 +549,12 @@ def test_a_common_ground_split_needs_rare_words_in_the_last_stage(tmp_path: Path
     text = HELD_OUT.replace("rare_words: true, ", "")
     problem = only_problem(write(tmp_path, "c.yaml", text))
     assert (problem.line, problem.path) == (11, "holdout.common_ground") and "rare_words" in problem.message
+
+
+SCREENS = sorted((Path(__file__).resolve().parents[2] / "benchmarks" / "screens").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", SCREENS, ids=lambda p: p.name)
+def test_every_screen_in_benchmarks_is_a_valid_curriculum(path: Path) -> None:
+    curriculum = load_curriculum(path)
+    assert curriculum.name == path.stem and curriculum.stages
