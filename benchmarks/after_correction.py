@@ -5,7 +5,8 @@ and sorts every episode in which the instructor spoke into:
 
 - *succeeded*: the arm then did the task on the goal object;
 - *knocked the goal*: it failed, and the goal ended up farther from its start than reach allows (2.5 cm),
-  which leaves a reach episode unsolvable; *fell*: an object went off the table;
+  which leaves a reach episode unsolvable; *the goal fell*: it went off the table, the one fall that ends
+  an episode (another object lands on the floor and the episode goes on);
 - *fell short*: it failed without knocking the goal; the closest the end effector came to the goal object
   after the correction is reported (median), to tell "went elsewhere" from "stopped near".
 
@@ -28,9 +29,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lanrocli.envs.env import FALLEN, LanroEnv
+from lanrocli.envs.env import LanroEnv
 from lanrocli.tasks.reach import REACH_STILL
 from lanrocli.train.agent_policy import AgentPolicy
+from lanrocli.train.pretrained import agent_path
 from lanrocli.train.trainer import load_policy
 
 
@@ -38,7 +40,7 @@ from lanrocli.train.trainer import load_policy
 class Outcome:
     """One episode with a spoken correction."""
 
-    result: str  # succeeded, knocked the goal, fell, fell short
+    result: str  # succeeded, knocked the goal, the goal fell, fell short
     closest: float  # closest approach of the end effector to the goal after the correction, m
     first_knock: str | None  # e.g. "another object, after the correction"; None if nothing moved 2.5 cm
 
@@ -63,10 +65,10 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int) -> Outcome | None:
             first_knock = f"{which}, {'after' if spoken else 'before'} the correction"
     if info["correction"] is None:
         return None
-    if terminated:
+    if info["is_success"]:
         result = "succeeded"
-    elif np.any(positions[:, 2] < FALLEN):
-        result = "fell"
+    elif info["fell"]:
+        result = "the goal fell"
     elif moved[goal] > REACH_STILL:
         result = "knocked the goal"
     else:
@@ -76,13 +78,13 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int) -> Outcome | None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("checkpoint", type=Path, help="checkpoint, pointer file or run folder")
+    parser.add_argument("checkpoint", type=Path, help="checkpoint, pointer file, run folder or shipped agent's name")
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--kinds", nargs="+", default=["ambiguity", "instruction_correction"])
     args = parser.parse_args()
     torch.set_num_threads(1)
-    settings, policy = load_policy(args.checkpoint)
+    settings, policy = load_policy(agent_path(args.checkpoint))
     env_settings = settings.env.for_evaluation().replace(correction_rate=1.0, kinds=tuple(args.kinds))
     env = LanroEnv(
         settings.task, env_settings, object_slots=settings.slots, vocabulary=policy.vocabulary, holdout=settings.holdout
@@ -93,7 +95,7 @@ def main() -> None:
     print(f"{args.checkpoint}: {settings.task}, kinds {', '.join(args.kinds)}, seeds {args.seed}..")
     print(f"{args.episodes} episodes, a correction was spoken in {len(spoken)}")
     results = Counter(o.result for o in spoken)
-    for result in ("succeeded", "knocked the goal", "fell", "fell short"):
+    for result in ("succeeded", "knocked the goal", "the goal fell", "fell short"):
         near = [o.closest for o in spoken if o.result == result and np.isfinite(o.closest)]
         median = f", closest approach to the goal after it: median {np.median(near) * 100:.1f} cm" if near else ""
         print(f"  {result:<16} {results[result]:>4}{median}")
