@@ -129,16 +129,11 @@ class SACAgent:
             out = self.actor.sample(x, language, self.generator, present)[0].cpu().numpy()
         return out[0] if observation.ndim == 1 else out
 
-    def attention(self, obs: Mapping[str, np.ndarray]) -> np.ndarray | None:
-        """The actor's attention over the object slots, [B, slots] (or [slots] for one unbatched
-        observation), summing to 1 over the present objects; None for a flat agent, which has none."""
-        weights = self.act_and_attend(obs)[1]
-        return weights[0] if weights is not None and np.asarray(obs["observation"]).ndim == 1 else weights
-
     @torch.no_grad()
     def act_and_attend(self, obs: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
         """For a batch as :meth:`act` takes it: the deterministic actions [B, A] and the actor's attention
-        [B, slots] (None for a flat agent), both from one reading of the sentences and the objects."""
+        over the object slots [B, slots], summing to 1 over the present objects (None for a flat agent),
+        both from one reading of the sentences and the objects."""
         x, present, language = self._read(obs)
         if self.actor.reader is None:
             return self.actor.mode(x, language, present).cpu().numpy(), None

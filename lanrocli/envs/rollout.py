@@ -1,8 +1,8 @@
 """Episodes run for measurement, one after another or several side by side.
 
-A test of 500 episodes spends about as long choosing actions as simulating them when the policy is a
-network asked one observation at a time. Run side by side, the episodes in progress are answered in one
-batch per step (a policy with ``act_batch``), which costs little more than one of them. Episode ``i`` is
+A network asked one observation at a time pays its fixed cost per call for every step of every episode.
+Run side by side, the episodes in progress are answered in one batch per step (a policy with
+``act_batch``), which costs little more than one of them. Episode ``i`` is
 always reset with seed ``first + i`` and its result is reported in index order, so side by side or not, a
 policy meets the same episodes and a stopping rule stops at the same one.
 """

@@ -87,9 +87,17 @@ class TaskDefinition:
     """The words the instructor may use for the task; the first is the one hints show."""
     gripper: ClassVar[bool] = False
     """Whether the arm uses its fingers: the action gains a fourth number, the finger opening."""
+    threshold_range: ClassVar[tuple[float, float] | None] = None
+    """Where a task draws one number per episode (how far to push, how high to lift), its range; the
+    episode's draw is :attr:`threshold`."""
+
+    def __init__(self) -> None:
+        self.threshold = 0.0 if self.threshold_range is None else self.threshold_range[0]
 
     def reset(self, rng: np.random.Generator) -> None:
-        """Draw this episode's parameters (distances, heights); most tasks have none."""
+        """Draw this episode's :attr:`threshold`, where the task has a ``threshold_range``."""
+        if self.threshold_range is not None:
+            self.threshold = float(rng.uniform(*self.threshold_range))
 
     def achieved(self, view: TaskView) -> np.ndarray:
         """Per object, whether the task is done on it in this state."""

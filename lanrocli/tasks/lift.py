@@ -17,13 +17,8 @@ class Lift(Grasp):
     name = "lift"
     gym_id = "lanro/Lift-v0"
     verbs = ("lift", "raise", "hoist")
-
-    def __init__(self) -> None:
-        self.height = LIFT_HEIGHT[0]
-
-    def reset(self, rng: np.random.Generator) -> None:
-        self.height = float(rng.uniform(*LIFT_HEIGHT))
+    threshold_range = LIFT_HEIGHT
 
     def achieved(self, view: TaskView) -> np.ndarray:
         raised = view.positions[:, 2] - view.start_positions[:, 2]
-        return held(view) & (raised > self.height)
+        return held(view) & (raised > self.threshold)

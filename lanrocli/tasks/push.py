@@ -22,16 +22,11 @@ class Push(TaskDefinition):
     name = "push"
     gym_id = "lanro/Push-v0"
     verbs = ("push", "move", "shift")
-
-    def __init__(self) -> None:
-        self.distance = PUSH_DISTANCE[0]
-
-    def reset(self, rng: np.random.Generator) -> None:
-        self.distance = float(rng.uniform(*PUSH_DISTANCE))
+    threshold_range = PUSH_DISTANCE
 
     def achieved(self, view: TaskView) -> np.ndarray:
         delta = view.positions - view.start_positions
-        slid = np.linalg.norm(delta[:, :2], axis=1) > self.distance
+        slid = np.linalg.norm(delta[:, :2], axis=1) > self.threshold
         return slid & (np.abs(delta[:, 2]) < view.heights)
 
     def oracle(self, view: ArmView, memory: OracleMemory) -> np.ndarray:

@@ -24,11 +24,7 @@ class AgentPolicy:
     def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> np.ndarray:
         return self.agent.act(observation, deterministic=True)
 
-    def attention(self, observation: dict[str, np.ndarray]) -> np.ndarray | None:
-        """The actor's attention over the object slots for one observation, which evaluation reads to tell
-        how much of it lies on the goal; None for a flat agent."""
-        return self.agent.attention(observation)
-
     def act_batch(self, observations: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
-        """Actions and attention for several episodes' observations at once (``rollout.BatchPolicy``)."""
+        """Actions and attention for several episodes' observations at once (``rollout.BatchPolicy``):
+        evaluation reads the attention to tell how much of it lies on the goal."""
         return self.agent.act_and_attend(observations)

@@ -97,20 +97,22 @@ def _attention_on_named(agent: SACAgent, batch: Batch) -> list[float]:
 
 
 @pytest.mark.parametrize("architecture", ["flat", "objects"])
-def test_act_and_attend_answers_a_batch_as_act_and_attention_answer_each_row(architecture: str) -> None:
+def test_act_and_attend_answers_a_batch_as_it_answers_each_row_alone(architecture: str) -> None:
     agent = _agent(architecture=architecture)
     rng = np.random.default_rng(5)
     agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
     agent.update(_batch(rng))
     obs = {"observation": rng.normal(size=(6, OBS_DIM)).astype(np.float32), "instruction": np.stack([RED, BLUE] * 3)}
     actions, weights = agent.act_and_attend(obs)
-    rows = [{key: value[i] for key, value in obs.items()} for i in range(6)]
-    np.testing.assert_allclose(actions, np.stack([agent.act(row, deterministic=True) for row in rows]), atol=1e-6)
+    rows = [agent.act_and_attend({key: value[i : i + 1] for key, value in obs.items()}) for i in range(6)]
+    np.testing.assert_allclose(actions, np.concatenate([a for a, _ in rows]), atol=1e-6)
+    np.testing.assert_allclose(actions, agent.act(obs, deterministic=True), atol=1e-6)
     if architecture == "flat":
-        assert weights is None and agent.attention(rows[0]) is None
+        assert weights is None and all(w is None for _, w in rows)
     else:
         assert weights is not None
-        np.testing.assert_allclose(weights, np.stack([agent.attention(row) for row in rows]), atol=1e-6)
+        np.testing.assert_allclose(weights, np.concatenate([w for _, w in rows]), atol=1e-6)
+        np.testing.assert_allclose(weights.sum(axis=1), 1.0, atol=1e-6)
 
 
 def test_grounding_loss_teaches_every_reader_which_object_a_sentence_names() -> None:

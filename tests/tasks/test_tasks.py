@@ -56,9 +56,9 @@ def test_push_needs_the_episode_distance_without_lifting() -> None:
     push = Push()
     push.reset(np.random.default_rng(0))
     moved = np.zeros_like(STARTS)
-    moved[0, 1] = push.distance * 1.01
-    moved[1, 0] = push.distance * 0.99
-    moved[2, 0] = push.distance * 1.01
+    moved[0, 1] = push.threshold * 1.01
+    moved[1, 0] = push.threshold * 0.99
+    moved[2, 0] = push.threshold * 1.01
     moved[2, 2] = 0.05  # lifted off the table by more than its height
     assert push.achieved(view(moved)).tolist() == [True, False, False]
 
@@ -73,9 +73,9 @@ def test_grasp_and_lift_need_both_fingers_and_the_object_raised() -> None:
     assert not Grasp().achieved(one).any()
     assert not Grasp().achieved(far).any()
     lift = Lift()
-    lift.height = OFF_TABLE * 2
+    lift.threshold = OFF_TABLE * 2
     assert not lift.achieved(both).any()
-    lift.height = OFF_TABLE
+    lift.threshold = OFF_TABLE
     assert lift.achieved(both).tolist() == [True, False, False]
 
 
