@@ -22,8 +22,7 @@ import time
 import numpy as np
 
 from lanrocli.envs.env import LanroEnv
-
-TASKS = ("reach", "push", "grasp", "lift")
+from lanrocli.tasks import TASKS
 
 REFERENCE_SNIPPET = """
 import sys, time, warnings
