@@ -135,16 +135,19 @@ def attention_loss(
 ) -> torch.Tensor:
     """The grounding loss: cross-entropy of the actor's and each critic's attention (logits [members, B,
     slots]) against the object that a transition's sentence names (``label``, -1 where none is known); zero
-    without object-wise readers, a weight of 0 or labelled transitions, so that it costs nothing then."""
-    rows = torch.as_tensor(np.flatnonzero(label >= 0), device=device)
-    if critic_scores is None or actor_scores is None or weight == 0.0 or rows.numel() == 0:
+    without object-wise readers, a weight of 0 or labelled transitions, so that it costs nothing then.
+
+    The rows without a label are left out by the cross-entropy itself (its ignored class), so the scores
+    are used as the readers computed them, with no rows picked out.
+    """
+    if critic_scores is None or actor_scores is None or weight == 0.0 or not (label >= 0).any():
         return torch.zeros((), device=device)
-    named = torch.as_tensor(np.asarray(label), device=device).to(torch.int64)[rows]
-    loss = torch.zeros((), device=device)
-    for scores in (critic_scores, actor_scores):
-        chosen = scores[:, rows]  # [members, rows, slots]
-        loss = loss + F.cross_entropy(chosen.flatten(0, 1), named.repeat(chosen.shape[0]))
-    return loss
+    named = torch.as_tensor(label, device=device)
+    critic, actor = (  # each the mean over its members and the labelled rows
+        F.cross_entropy(scores.transpose(1, 2), named.expand(scores.shape[0], -1), ignore_index=-1)
+        for scores in (critic_scores, actor_scores)
+    )
+    return critic + actor
 
 
 def _mlp(input_size: int, hidden_size: int, depth: int) -> nn.Sequential:
