@@ -40,21 +40,29 @@ def _tanh(x: torch.Tensor) -> torch.Tensor:
 
 class _LastState(torch.autograd.Function):
     """The state after each row's last step, for rows sorted by length, longest first, so that at step t
-    only the first ``active[t]`` rows still read words and each step computes those alone. Inputs come
+    only the first ``active[t]`` rows still read words and each step computes those alone. Words come
     packed: the rows active at step 0, then those at step 1, and so on. Only the first ``trained`` members
-    get gradients; the others (a target network) step along in the forward pass alone."""
+    get gradients; the others (a target network) step along in the forward pass alone.
+
+    The words' input gates are looked up in the tables here rather than before, so that the backward pass
+    adds the gradient into the trained members' small tables directly: the packed inputs' gradient, every
+    member's and many times a table's size, is never padded with the frozen members' zeros nor scattered
+    by a separate operation."""
 
     @staticmethod
     def forward(  # type: ignore[override]
         ctx: Any,
-        inputs: torch.Tensor,
+        tables: torch.Tensor,
+        words: torch.Tensor,
         weight_hh: torch.Tensor,
         bias_hh: torch.Tensor,
         active: list[int],
         trained: int,
     ) -> torch.Tensor:
-        """``inputs`` [members, sum(active), 3 * size]; ``weight_hh`` [members, 3 * size, size] and
-        ``bias_hh`` [members, 3 * size] as ``nn.GRU`` holds them. Returns [members, active[0], size]."""
+        """``tables`` [members, vocab, 3 * size]: each word's input gates; ``words`` [sum(active)]: the
+        packed words; ``weight_hh`` [members, 3 * size, size] and ``bias_hh`` [members, 3 * size] as
+        ``nn.GRU`` holds them. Returns [members, active[0], size]."""
+        inputs = tables.index_select(1, words)
         members, _, gates = inputs.shape
         size, rows = gates // 3, active[0]
         weight_t, bias = weight_hh.transpose(1, 2), bias_hh.unsqueeze(1)
@@ -80,13 +88,16 @@ class _LastState(torch.autograd.Function):
             h = torch.addcmul(n, z, h - n)
         if keep:
             # All members' values joined, then the trained ones kept: one slice per value, not one per step.
-            ctx.save_for_backward(weight_hh[:trained], *(torch.cat(values, dim=1)[:trained] for values in saved))
+            ctx.save_for_backward(
+                words, weight_hh[:trained], *(torch.cat(values, dim=1)[:trained] for values in saved)
+            )
+            ctx.vocab = tables.shape[1]
             ctx.active, ctx.frozen = active, members - trained
         return torch.cat([h, *reversed(finished)], dim=1)
 
     @staticmethod
-    def backward(ctx: Any, grad: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, None, None]:
-        weight_hh, before, rz, n, hidden_n = ctx.saved_tensors
+    def backward(ctx: Any, grad: torch.Tensor) -> tuple[torch.Tensor, None, torch.Tensor, torch.Tensor, None, None]:
+        words, weight_hh, before, rz, n, hidden_n = ctx.saved_tensors
         grad = grad[: weight_hh.shape[0]]
         members, packed, size = before.shape
         r, z = rz[..., :size], rz[..., size:]
@@ -110,11 +121,12 @@ class _LastState(torch.autograd.Function):
         hidden_all = torch.cat(hidden_grads[::-1], dim=1)  # [members, sum(active), 3 * size]
         grad_n = torch.cat(step_grads[::-1], dim=1) * to_n
         grad_inputs = torch.cat([hidden_all[..., : 2 * size], grad_n], dim=2)
+        grad_tables = grad_inputs.new_zeros(members, ctx.vocab, 3 * size).index_add_(1, words, grad_inputs)
         grad_weight = torch.bmm(hidden_all.transpose(1, 2), before)
-        grads = (grad_inputs, grad_weight, hidden_all.sum(dim=1))
+        grads = (grad_tables, grad_weight, hidden_all.sum(dim=1))
         if ctx.frozen:
             grads = tuple(torch.cat([part, part.new_zeros(ctx.frozen, *part.shape[1:])]) for part in grads)
-        return *grads, None, None
+        return grads[0], None, *grads[1:], None, None
 
 
 def read_sentences(
@@ -142,8 +154,8 @@ def read_sentences(
     active = [k for k in reading.sum(dim=1).tolist() if k > 0]
     if not active:
         return input_tables.new_zeros(members, rows, size)
-    inputs = input_tables.index_select(1, tokens[order].t()[reading])
+    words = tokens[order].t()[reading]
     trained = (members if trained is None else trained) if torch.is_grad_enabled() else 0
-    h = _LastState.apply(inputs, weight_hh, bias_hh, active, trained)  # the rows with words, longest first
+    h = _LastState.apply(input_tables, words, weight_hh, bias_hh, active, trained)  # the rows with words, longest first
     h = torch.cat([h, h.new_zeros(members, rows - active[0], size)], dim=1)
     return h.index_select(1, torch.argsort(order))
