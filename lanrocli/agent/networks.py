@@ -106,7 +106,7 @@ class SceneReader(nn.Module):
         # Products and sums rather than einsum, which on CPU became batched matmuls of one row each and made
         # an update slower (docs/performance.md); these are a few vectorised passes.
         scores = (keys * self.query(language).unsqueeze(2)).sum(dim=-1) / math.sqrt(keys.shape[-1])
-        return scores.masked_fill(~present, torch.finfo(scores.dtype).min)
+        return torch.where(present, scores, torch.finfo(scores.dtype).min)
 
     def forward(
         self,
@@ -225,14 +225,16 @@ class Actor(nn.Module):
         part of its saved state and a resumed run draws the same actions.
         """
         mean, log_std = self(obs, language, present, scores)
-        std = log_std.exp()
         noise = torch.randn(mean.shape, generator=generator, device=mean.device, dtype=mean.dtype)
-        u = mean + std * noise
-        gaussian_log_prob = (-0.5 * noise.pow(2) - log_std - 0.5 * math.log(2 * math.pi)).sum(dim=1)
-        # Change of variables for a = tanh(u): log|da/du| = log(1 - tanh(u)^2), written in a form that
-        # stays finite when tanh(u) saturates at +-1.
-        log_det = (2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))).sum(dim=1)
-        return torch.tanh(u), gaussian_log_prob - log_det
+        u = torch.addcmul(mean, log_std.exp(), noise)
+        # Per dimension, log N(u; mean, std) = -noise^2 / 2 - log_std - log(2 pi) / 2, less the change of
+        # variables for a = tanh(u): log|da/du| = log(1 - tanh(u)^2) = 2 (log 2 - u - softplus(-2u)), a form
+        # that stays finite when tanh(u) saturates at +-1. What varies is summed over the dimensions and the
+        # constants are added once per row. Products and sums are between tensors: a Python number in one is
+        # first made a tensor, four operations more each time.
+        varying = torch.add(torch.addcmul(log_std, noise, noise, value=0.5), u + F.softplus(-(u + u)), alpha=-2.0)
+        constant = mean.shape[1] * (0.5 * math.log(2 * math.pi) + 2.0 * math.log(2.0))
+        return torch.tanh(u), -(varying.sum(dim=1) + constant)
 
     def mode(self, obs: torch.Tensor, language: torch.Tensor, present: torch.Tensor | None = None) -> torch.Tensor:
         """The deterministic action for evaluation: the squashed mean."""
