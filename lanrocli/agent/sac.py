@@ -157,10 +157,11 @@ class SACAgent:
         rows = batch.obs.shape[0]
         # The next states come first and this batch's second, in one array: the normaliser, the encoders and
         # the actor read both in one pass each, and the actor draws its noise for the next states before the
-        # policy's, as two passes in that order would.
+        # policy's, as two passes in that order would. (Halves are cut by split with a list of sizes, one
+        # operation where chunk takes three per half.)
         both_obs, both_present = self._observe(np.concatenate([batch.next_obs, batch.obs]))
-        next_obs, obs = both_obs.chunk(2)
-        next_present, present = (None, None) if both_present is None else both_present.chunk(2)
+        next_obs, obs = both_obs.split([rows, rows])
+        next_present, present = (None, None) if both_present is None else both_present.split([rows, rows])
         both_tokens = self._tensor(np.concatenate([batch.next_instruction, batch.instruction]), torch.int64)
         action = self._tensor(batch.action, torch.float32)
         # The per-transition numbers as one array: one conversion rather than one each.
@@ -187,8 +188,8 @@ class SACAgent:
         both_action, both_log_prob = self.actor.sample(
             both_obs, both_actor_language, self.generator, both_present, both_actor_scores
         )
-        next_action, pi_action = both_action.chunk(2)
-        next_log_prob, log_prob = both_log_prob.chunk(2)
+        next_action, pi_action = both_action.split([rows, rows])
+        next_log_prob, log_prob = both_log_prob.split([rows, rows])
 
         # Critic: regress on the soft Bellman target of the target critic and the current policy.
         with torch.no_grad():
