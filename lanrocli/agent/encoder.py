@@ -70,10 +70,14 @@ def _distinct(tokens: torch.Tensor, vocab_size: int) -> tuple[torch.Tensor, torc
 def _summarise(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> torch.Tensor:
     """Every row of ``tokens`` read by every encoder, [encoders, B, hidden]; an empty row reads as zeros."""
     grus = [encoder.gru for encoder in encoders]
-    words = [encoder.embedding.weight for encoder in encoders]
-    tables = torch.stack([torch.addmm(gru.bias_ih_l0, word, gru.weight_ih_l0.t()) for word, gru in zip(words, grus)])
-    weight_hh = torch.stack([gru.weight_hh_l0 for gru in grus])
-    bias_hh = torch.stack([gru.bias_hh_l0 for gru in grus])
+
+    def stacked(name: str) -> torch.Tensor:
+        return torch.stack([getattr(gru, name) for gru in grus])
+
+    # Every encoder's table of each word's input gates in one batched product, not one product each.
+    words = torch.stack([encoder.embedding.weight for encoder in encoders])
+    tables = torch.baddbmm(stacked("bias_ih_l0").unsqueeze(1), words, stacked("weight_ih_l0").transpose(1, 2))
+    weight_hh, bias_hh = stacked("weight_hh_l0"), stacked("bias_hh_l0")
     learning = [any(p.requires_grad for p in encoder.parameters()) for encoder in encoders]
     trained = sum(learning) if learning == sorted(learning, reverse=True) else None  # learning ones first
     return read_sentences(tables, weight_hh, bias_hh, tokens, PAD_ID, trained)
