@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 import torch
 
 
@@ -134,7 +135,7 @@ def read_sentences(
     input_tables: torch.Tensor,
     weight_hh: torch.Tensor,
     bias_hh: torch.Tensor,
-    tokens: torch.Tensor,
+    tokens: np.ndarray,
     pad_id: int,
     trained: int | None = None,
 ) -> torch.Tensor:
@@ -142,21 +143,21 @@ def read_sentences(
 
     ``input_tables``: [members, vocab, 3 * size], each GRU's input gates ``x W_ih + b_ih`` for each word
     (``x`` its embedding). ``weight_hh``: [members, 3 * size, size] and ``bias_hh``: [members, 3 * size],
-    as ``nn.GRU`` holds them. ``tokens``: int64 [rows, L], words followed by ``pad_id``. A row without
-    words keeps the zero state. Only the first ``trained`` members (all by default) get gradients.
-    Returns [members, rows, size].
+    as ``nn.GRU`` holds them. ``tokens``: int [rows, L], words followed by ``pad_id``, a host array: which
+    rows read a word at each step is bookkeeping for numpy, not a sequence of small tensor operations (and,
+    on a GPU, of waits for them). A row without words keeps the zero state. Only the first ``trained``
+    members (all by default) get gradients. Returns [members, rows, size].
     """
     members, rows = input_tables.shape[0], tokens.shape[0]
     size = weight_hh.shape[2]
-    lengths = (tokens != pad_id).sum(dim=1)
-    order = torch.argsort(lengths, descending=True, stable=True)
-    steps = torch.arange(tokens.shape[1], device=tokens.device)
-    reading = steps.unsqueeze(1) < lengths[order].unsqueeze(0)  # [L, rows]: who reads a word at each step
-    active = [k for k in reading.sum(dim=1).tolist() if k > 0]
+    lengths = (tokens != pad_id).sum(axis=1)
+    order = np.argsort(-lengths, kind="stable")
+    reading = np.arange(tokens.shape[1])[:, None] < lengths[order]  # [L, rows]: who reads a word at each step
+    active = [k for k in reading.sum(axis=1).tolist() if k > 0]
     if not active:
         return input_tables.new_zeros(members, rows, size)
-    words = tokens[order].t()[reading]
+    words = torch.as_tensor(tokens[order].T[reading], dtype=torch.int64, device=input_tables.device)
     trained = (members if trained is None else trained) if torch.is_grad_enabled() else 0
     h = _LastState.apply(input_tables, words, weight_hh, bias_hh, active, trained)  # the rows with words, longest first
     h = torch.cat([h, h.new_zeros(members, rows - active[0], size)], dim=1)
-    return h.index_select(1, torch.argsort(order))
+    return h.index_select(1, torch.as_tensor(np.argsort(order), device=h.device))

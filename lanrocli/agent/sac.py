@@ -162,7 +162,7 @@ class SACAgent:
         both_obs, both_present = self._observe(np.concatenate([batch.next_obs, batch.obs]))
         next_obs, obs = both_obs.split([rows, rows])
         next_present, present = (None, None) if both_present is None else both_present.split([rows, rows])
-        both_tokens = self._tensor(np.concatenate([batch.next_instruction, batch.instruction]), torch.int64)
+        both_tokens = np.concatenate([batch.next_instruction, batch.instruction])
         action = self._tensor(batch.action, torch.float32)
         # The per-transition numbers as one array: one conversion rather than one each.
         numbers = np.stack([batch.reward, 1.0 - batch.done, s.gamma**batch.steps, batch.failed])
