@@ -142,7 +142,7 @@ def attention_loss(
     """
     if critic_scores is None or actor_scores is None or weight == 0.0 or not (label >= 0).any():
         return torch.zeros((), device=device)
-    named = torch.as_tensor(label, device=device)
+    named = torch.as_tensor(label, dtype=torch.int64, device=device)
     critic, actor = (  # each the mean over its members and the labelled rows
         F.cross_entropy(scores.transpose(1, 2), named.expand(scores.shape[0], -1), ignore_index=-1)
         for scores in (critic_scores, actor_scores)

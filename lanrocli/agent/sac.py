@@ -156,9 +156,10 @@ class SACAgent:
         s = self.settings
         rows = batch.obs.shape[0]
         # The next states come first and this batch's second, in one array: the normaliser, the encoders and
-        # the actor read both in one pass each, and the actor draws its noise for the next states before the
-        # policy's, as two passes in that order would. (Halves are cut by split with a list of sizes, one
-        # operation where chunk takes three per half.)
+        # the actor read both in one pass each. The actor's one draw of noise gives the next states theirs
+        # before the policy's, as two draws in that order did; on CPU they are the same numbers wherever
+        # batch size times action size is a multiple of 16 (torch draws normals 16 at a time). (Halves are
+        # cut by split with a list of sizes, one operation where chunk takes three per half.)
         both_obs, both_present = self._observe(np.concatenate([batch.next_obs, batch.obs]))
         next_obs, obs = both_obs.split([rows, rows])
         next_present, present = (None, None) if both_present is None else both_present.split([rows, rows])
