@@ -68,8 +68,8 @@ class _LastState(torch.autograd.Function):
         size, rows = gates // 3, active[0]
         weight_t, bias = weight_hh.transpose(1, 2), bias_hh.unsqueeze(1)
         # Each step's words, cut out of the packed inputs in one operation per gate group rather than
-        # sliced step by step. Tensors are cut by split with a list of sizes throughout: one operation and
-        # a view per part, where slicing or chunk takes two or three operations per part.
+        # sliced step by step. Tensors are cut into parts by split with a list of sizes: one operation and a
+        # view per part, where slicing or chunk takes two or three operations per part.
         inputs_rz, inputs_n = inputs.split([2 * size, size], dim=2)
         steps = zip(active, inputs_rz.split(active, dim=1), inputs_n.split(active, dim=1))
         h = inputs.new_zeros(members, rows, size)
@@ -102,7 +102,7 @@ class _LastState(torch.autograd.Function):
         words, weight_hh, before, rz, n, hidden_n = ctx.saved_tensors
         grad = grad[: weight_hh.shape[0]]
         members, packed, size = before.shape
-        r, z = rz[..., :size], rz[..., size:]
+        r, z = rz.split([size, size], dim=2)
         # What does not depend on the incoming gradient, for all steps at once: the derivatives of h' with
         # respect to the recurrent gate inputs h W_h + b_h (r, z, n), and to n's pre-activation.
         to_n = (1.0 - z) * (1.0 - n * n)
