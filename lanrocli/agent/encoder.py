@@ -34,8 +34,9 @@ class LanguageEncoder(nn.Module):
 
     def forward(self, tokens: torch.Tensor) -> torch.Tensor:
         """``tokens``: int64 [B, L] ids padded with 0. Returns float [B, hidden]."""
-        distinct, rows = _distinct(tokens.cpu().numpy(), self.vocab_size)
-        sentences, inverse = (torch.as_tensor(a, device=tokens.device) for a in (distinct, rows))
+        # Acting reads a few sentences at a time, whose distinct rows torch's unique finds quickest (on four
+        # rows, 20 us sooner than the host-side bookkeeping that pays off on an update's hundred and more).
+        sentences, inverse = torch.unique(tokens, dim=0, return_inverse=True)
         lengths = (sentences != PAD_ID).sum(dim=1)
         states, _ = self.gru(self.embedding(sentences[:, : max(int(lengths.max()), 1)]))
         summary = states[torch.arange(sentences.shape[0], device=tokens.device), (lengths - 1).clamp(min=0)]
