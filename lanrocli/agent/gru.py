@@ -27,82 +27,65 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 import torch
 
 
 def _tanh(x: torch.Tensor) -> torch.Tensor:
-    """tanh(x) = 2 sigmoid(2x) - 1: the CPU build's tanh took 20 us on a [145, 64] step, sigmoid 3 us.
-    Doubling by a sum rather than a product with a Python number spares that number's conversion to a
-    tensor, four operations each time."""
-    s = torch.sigmoid(x + x)
-    return s + s - 1.0
+    """tanh(x) = 2 sigmoid(2x) - 1: the CPU build's tanh took 20 us on a [145, 64] step, sigmoid 3 us."""
+    return torch.sigmoid(2.0 * x) * 2.0 - 1.0
 
 
 class _LastState(torch.autograd.Function):
     """The state after each row's last step, for rows sorted by length, longest first, so that at step t
-    only the first ``active[t]`` rows still read words and each step computes those alone. Words come
+    only the first ``active[t]`` rows still read words and each step computes those alone. Inputs come
     packed: the rows active at step 0, then those at step 1, and so on. Only the first ``trained`` members
-    get gradients; the others (a target network) step along in the forward pass alone.
-
-    The words' input gates are looked up in the tables here rather than before, so that the backward pass
-    adds the gradient into the trained members' small tables directly: the packed inputs' gradient, every
-    member's and many times a table's size, is never padded with the frozen members' zeros nor scattered
-    by a separate operation."""
+    get gradients; the others (a target network) step along in the forward pass alone."""
 
     @staticmethod
     def forward(  # type: ignore[override]
         ctx: Any,
-        tables: torch.Tensor,
-        words: torch.Tensor,
+        inputs: torch.Tensor,
         weight_hh: torch.Tensor,
         bias_hh: torch.Tensor,
         active: list[int],
         trained: int,
     ) -> torch.Tensor:
-        """``tables`` [members, vocab, 3 * size]: each word's input gates; ``words`` [sum(active)]: the
-        packed words; ``weight_hh`` [members, 3 * size, size] and ``bias_hh`` [members, 3 * size] as
-        ``nn.GRU`` holds them. Returns [members, active[0], size]."""
-        inputs = tables.index_select(1, words)
+        """``inputs`` [members, sum(active), 3 * size]; ``weight_hh`` [members, 3 * size, size] and
+        ``bias_hh`` [members, 3 * size] as ``nn.GRU`` holds them. Returns [members, active[0], size]."""
         members, _, gates = inputs.shape
         size, rows = gates // 3, active[0]
         weight_t, bias = weight_hh.transpose(1, 2), bias_hh.unsqueeze(1)
-        # Each step's words, cut out of the packed inputs in one operation per gate group rather than
-        # sliced step by step. Tensors are cut into parts by split with a list of sizes: one operation and a
-        # view per part, where slicing or chunk takes two or three operations per part.
-        inputs_rz, inputs_n = inputs.split([2 * size, size], dim=2)
-        steps = zip(active, inputs_rz.split(active, dim=1), inputs_n.split(active, dim=1))
         h = inputs.new_zeros(members, rows, size)
         finished: list[torch.Tensor] = []  # the final states of rows whose sentence has ended, last rows first
         saved: tuple[list[torch.Tensor], ...] = ([], [], [], [])  # h before the step, r and z, n, h W_hn + b_hn
         keep = trained > 0 and any(ctx.needs_input_grad)
-        for k, x_rz, x_n in steps:
+        start = 0
+        for k in active:
             if k < h.shape[1]:
                 finished.append(h[:, k:])
                 h = h[:, :k]
-            hidden_rz, hidden_n = torch.baddbmm(bias, h, weight_t).split([2 * size, size], dim=2)
-            rz = torch.sigmoid(x_rz + hidden_rz)
-            r, z = rz.split([size, size], dim=2)
-            n = _tanh(torch.addcmul(x_n, r, hidden_n))
+            hidden = torch.baddbmm(bias, h, weight_t)
+            x = inputs[:, start : start + k]
+            start += k
+            rz = torch.sigmoid(x[..., : 2 * size] + hidden[..., : 2 * size])
+            n = _tanh(torch.addcmul(x[..., 2 * size :], rz[..., :size], hidden[..., 2 * size :]))
             if keep:
-                for store, value in zip(saved, (h, rz, n, hidden_n)):
+                for store, value in zip(saved, (h, rz, n, hidden[..., 2 * size :])):
                     store.append(value)
-            h = torch.addcmul(n, z, h - n)
+            h = torch.addcmul(n, rz[..., size:], h - n)
         if keep:
-            # All members' values joined, then the trained ones kept: one slice per value, not one per step.
             ctx.save_for_backward(
-                words, weight_hh[:trained], *(torch.cat(values, dim=1)[:trained] for values in saved)
+                weight_hh[:trained], *(torch.cat([value[:trained] for value in values], dim=1) for values in saved)
             )
-            ctx.vocab = tables.shape[1]
             ctx.active, ctx.frozen = active, members - trained
         return torch.cat([h, *reversed(finished)], dim=1)
 
     @staticmethod
-    def backward(ctx: Any, grad: torch.Tensor) -> tuple[torch.Tensor, None, torch.Tensor, torch.Tensor, None, None]:
-        words, weight_hh, before, rz, n, hidden_n = ctx.saved_tensors
+    def backward(ctx: Any, grad: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, None, None]:
+        weight_hh, before, rz, n, hidden_n = ctx.saved_tensors
         grad = grad[: weight_hh.shape[0]]
         members, packed, size = before.shape
-        r, z = rz.split([size, size], dim=2)
+        r, z = rz[..., :size], rz[..., size:]
         # What does not depend on the incoming gradient, for all steps at once: the derivatives of h' with
         # respect to the recurrent gate inputs h W_h + b_h (r, z, n), and to n's pre-activation.
         to_n = (1.0 - z) * (1.0 - n * n)
@@ -110,32 +93,31 @@ class _LastState(torch.autograd.Function):
         to_hidden = to_hidden.view(members, packed, 3, size)
         step_grads: list[torch.Tensor] = []  # the gradient with respect to each step's new state
         hidden_grads: list[torch.Tensor] = []  # ... and to its recurrent gate inputs
-        active = ctx.active
-        # Per step, counting back: its rows, the rows of the step before, and its share of the saved values.
-        steps = zip(active, active[:1] + active[:-1], to_hidden.split(active, dim=1), z.split(active, dim=1))
-        g = grad[:, : active[-1]]
-        for k, previous, to_hidden_t, z_t in reversed(list(steps)):
+        ends = torch.tensor(ctx.active).cumsum(0).tolist()
+        active = ctx.active + [0]
+        g = grad[:, : active[-2]]
+        for t in reversed(range(len(ctx.active))):
+            k, step = active[t], slice(ends[t] - active[t], ends[t])
             step_grads.append(g)
-            hidden_grads.append((to_hidden_t * g.unsqueeze(2)).flatten(2))
-            g = torch.baddbmm(g * z_t, hidden_grads[-1], weight_hh)  # with respect to h before the step
-            if previous > k:  # rows whose sentence ended at the step before join
-                g = torch.cat([g, grad[:, k:previous]], dim=1)
+            hidden_grads.append((to_hidden[:, step] * g.unsqueeze(2)).flatten(2))
+            g = torch.baddbmm(g * z[:, step], hidden_grads[-1], weight_hh)  # with respect to h before the step
+            if t > 0 and active[t - 1] > k:  # rows whose sentence ended at step t - 1 join
+                g = torch.cat([g, grad[:, k : active[t - 1]]], dim=1)
         hidden_all = torch.cat(hidden_grads[::-1], dim=1)  # [members, sum(active), 3 * size]
         grad_n = torch.cat(step_grads[::-1], dim=1) * to_n
         grad_inputs = torch.cat([hidden_all[..., : 2 * size], grad_n], dim=2)
-        grad_tables = grad_inputs.new_zeros(members, ctx.vocab, 3 * size).index_add_(1, words, grad_inputs)
         grad_weight = torch.bmm(hidden_all.transpose(1, 2), before)
-        grads = (grad_tables, grad_weight, hidden_all.sum(dim=1))
+        grads = (grad_inputs, grad_weight, hidden_all.sum(dim=1))
         if ctx.frozen:
             grads = tuple(torch.cat([part, part.new_zeros(ctx.frozen, *part.shape[1:])]) for part in grads)
-        return grads[0], None, *grads[1:], None, None
+        return *grads, None, None
 
 
 def read_sentences(
     input_tables: torch.Tensor,
     weight_hh: torch.Tensor,
     bias_hh: torch.Tensor,
-    tokens: np.ndarray,
+    tokens: torch.Tensor,
     pad_id: int,
     trained: int | None = None,
 ) -> torch.Tensor:
@@ -143,21 +125,21 @@ def read_sentences(
 
     ``input_tables``: [members, vocab, 3 * size], each GRU's input gates ``x W_ih + b_ih`` for each word
     (``x`` its embedding). ``weight_hh``: [members, 3 * size, size] and ``bias_hh``: [members, 3 * size],
-    as ``nn.GRU`` holds them. ``tokens``: int [rows, L], words followed by ``pad_id``, a host array: which
-    rows read a word at each step is bookkeeping for numpy, not a sequence of small tensor operations (and,
-    on a GPU, of waits for them). A row without words keeps the zero state. Only the first ``trained``
-    members (all by default) get gradients. Returns [members, rows, size].
+    as ``nn.GRU`` holds them. ``tokens``: int64 [rows, L], words followed by ``pad_id``. A row without
+    words keeps the zero state. Only the first ``trained`` members (all by default) get gradients.
+    Returns [members, rows, size].
     """
     members, rows = input_tables.shape[0], tokens.shape[0]
     size = weight_hh.shape[2]
-    lengths = (tokens != pad_id).sum(axis=1)
-    order = np.argsort(-lengths, kind="stable")
-    reading = np.arange(tokens.shape[1])[:, None] < lengths[order]  # [L, rows]: who reads a word at each step
-    active = [k for k in reading.sum(axis=1).tolist() if k > 0]
+    lengths = (tokens != pad_id).sum(dim=1)
+    order = torch.argsort(lengths, descending=True, stable=True)
+    steps = torch.arange(tokens.shape[1], device=tokens.device)
+    reading = steps.unsqueeze(1) < lengths[order].unsqueeze(0)  # [L, rows]: who reads a word at each step
+    active = [k for k in reading.sum(dim=1).tolist() if k > 0]
     if not active:
         return input_tables.new_zeros(members, rows, size)
-    words = torch.as_tensor(tokens[order].T[reading], dtype=torch.int64, device=input_tables.device)
+    inputs = input_tables.index_select(1, tokens[order].t()[reading])
     trained = (members if trained is None else trained) if torch.is_grad_enabled() else 0
-    h = _LastState.apply(input_tables, words, weight_hh, bias_hh, active, trained)  # the rows with words, longest first
+    h = _LastState.apply(inputs, weight_hh, bias_hh, active, trained)  # the rows with words, longest first
     h = torch.cat([h, h.new_zeros(members, rows - active[0], size)], dim=1)
-    return h.index_select(1, torch.as_tensor(np.argsort(order), device=h.device))
+    return h.index_select(1, torch.argsort(order))

@@ -106,7 +106,7 @@ class SceneReader(nn.Module):
         # Products and sums rather than einsum, which on CPU became batched matmuls of one row each and made
         # an update slower (docs/performance.md); these are a few vectorised passes.
         scores = (keys * self.query(language).unsqueeze(2)).sum(dim=-1) / math.sqrt(keys.shape[-1])
-        return torch.where(present, scores, torch.finfo(scores.dtype).min)
+        return scores.masked_fill(~present, torch.finfo(scores.dtype).min)
 
     def forward(
         self,
@@ -135,19 +135,16 @@ def attention_loss(
 ) -> torch.Tensor:
     """The grounding loss: cross-entropy of the actor's and each critic's attention (logits [members, B,
     slots]) against the object that a transition's sentence names (``label``, -1 where none is known); zero
-    without object-wise readers, a weight of 0 or labelled transitions, so that it costs nothing then.
-
-    The rows without a label are left out by the cross-entropy itself (its ignored class), so the scores
-    are used as the readers computed them, with no rows picked out.
-    """
-    if critic_scores is None or actor_scores is None or weight == 0.0 or not (label >= 0).any():
+    without object-wise readers, a weight of 0 or labelled transitions, so that it costs nothing then."""
+    rows = torch.as_tensor(np.flatnonzero(label >= 0), device=device)
+    if critic_scores is None or actor_scores is None or weight == 0.0 or rows.numel() == 0:
         return torch.zeros((), device=device)
-    named = torch.as_tensor(label, dtype=torch.int64, device=device)
-    critic, actor = (  # each the mean over its members and the labelled rows
-        F.cross_entropy(scores.transpose(1, 2), named.expand(scores.shape[0], -1), ignore_index=-1)
-        for scores in (critic_scores, actor_scores)
-    )
-    return critic + actor
+    named = torch.as_tensor(np.asarray(label), device=device).to(torch.int64)[rows]
+    loss = torch.zeros((), device=device)
+    for scores in (critic_scores, actor_scores):
+        chosen = scores[:, rows]  # [members, rows, slots]
+        loss = loss + F.cross_entropy(chosen.flatten(0, 1), named.repeat(chosen.shape[0]))
+    return loss
 
 
 def _mlp(input_size: int, hidden_size: int, depth: int) -> nn.Sequential:
@@ -225,16 +222,14 @@ class Actor(nn.Module):
         part of its saved state and a resumed run draws the same actions.
         """
         mean, log_std = self(obs, language, present, scores)
+        std = log_std.exp()
         noise = torch.randn(mean.shape, generator=generator, device=mean.device, dtype=mean.dtype)
-        u = torch.addcmul(mean, log_std.exp(), noise)
-        # Per dimension, log N(u; mean, std) = -noise^2 / 2 - log_std - log(2 pi) / 2, less the change of
-        # variables for a = tanh(u): log|da/du| = log(1 - tanh(u)^2) = 2 (log 2 - u - softplus(-2u)), a form
-        # that stays finite when tanh(u) saturates at +-1. What varies is summed over the dimensions and the
-        # constants are added once per row. Products and sums are between tensors: a Python number in one is
-        # first made a tensor, four operations more each time.
-        varying = torch.add(torch.addcmul(log_std, noise, noise, value=0.5), u + F.softplus(-(u + u)), alpha=-2.0)
-        constant = mean.shape[1] * (0.5 * math.log(2 * math.pi) + 2.0 * math.log(2.0))
-        return torch.tanh(u), -(varying.sum(dim=1) + constant)
+        u = mean + std * noise
+        gaussian_log_prob = (-0.5 * noise.pow(2) - log_std - 0.5 * math.log(2 * math.pi)).sum(dim=1)
+        # Change of variables for a = tanh(u): log|da/du| = log(1 - tanh(u)^2), written in a form that
+        # stays finite when tanh(u) saturates at +-1.
+        log_det = (2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))).sum(dim=1)
+        return torch.tanh(u), gaussian_log_prob - log_det
 
     def mode(self, obs: torch.Tensor, language: torch.Tensor, present: torch.Tensor | None = None) -> torch.Tensor:
         """The deterministic action for evaluation: the squashed mean."""

@@ -154,65 +154,53 @@ class SACAgent:
         SAC does; they touch disjoint parameters, so one backward pass gives every network its gradient.
         """
         s = self.settings
-        rows = batch.obs.shape[0]
-        # The next states come first and this batch's second, in one array: the normaliser, the encoders and
-        # the actor read both in one pass each. The actor's one draw of noise gives the next states theirs
-        # before the policy's, as two draws in that order did; on CPU they are the same numbers wherever
-        # batch size times action size is a multiple of 16 (torch draws normals 16 at a time). (Halves are
-        # cut by split with a list of sizes, one operation where chunk takes three per half.)
-        both_obs, both_present = self._observe(np.concatenate([batch.next_obs, batch.obs]))
-        next_obs, obs = both_obs.split([rows, rows])
-        next_present, present = (None, None) if both_present is None else both_present.split([rows, rows])
-        both_tokens = np.concatenate([batch.next_instruction, batch.instruction])
+        obs, present = self._observe(batch.obs)
+        next_obs, next_present = self._observe(batch.next_obs)
+        tokens = self._tensor(batch.instruction, torch.int64)
+        next_tokens = self._tensor(batch.next_instruction, torch.int64)
         action = self._tensor(batch.action, torch.float32)
-        # The per-transition numbers as one array: one conversion rather than one each.
-        numbers = np.stack([batch.reward, 1.0 - batch.done, s.gamma**batch.steps, batch.failed])
-        reward, not_done, discount, failed = self._tensor(numbers, torch.float32)
+        reward = self._tensor(batch.reward, torch.float32)
+        not_done = 1.0 - self._tensor(batch.done, torch.float32)
+        discount = s.gamma ** self._tensor(batch.steps, torch.float32)
         alpha = self.log_alpha.detach().exp()
 
-        # The critic's, the actor's and the target critic's encoders read the sentences in one pass (this
-        # and the next ones nearly always coincide). A shared encoder learns from the critic's loss alone:
-        # the actor reads its summary detached.
+        # The critic's, the actor's and the target critic's encoders read this and the next sentences (they
+        # nearly always coincide) in one pass. A shared encoder learns from the critic's loss alone: the actor
+        # reads its summary detached.
         own_encoder = self.actor.encoder is not None
         encoders = [self.critic.encoder, *([self.actor.encoder] if own_encoder else []), self.target_critic.encoder]
-        summaries = encode(encoders, both_tokens)
-        critic_language = summaries[0, rows:]
-        next_target_language = summaries[-1, :rows].detach()
-        both_actor_language = summaries[1] if own_encoder else summaries[0].detach()
-
-        # The actor acts in the next states (for the Bellman target, which takes no gradient) and in this
-        # batch's (for its own loss). Object-wise readers weigh the objects once per network: the same
-        # attention serves the network and the grounding loss.
-        both_actor_scores = None
-        if self.actor.reader is not None:
-            both_actor_scores = self.actor.reader.scores(both_obs, both_actor_language, both_present)
-        both_action, both_log_prob = self.actor.sample(
-            both_obs, both_actor_language, self.generator, both_present, both_actor_scores
-        )
-        next_action, pi_action = both_action.split([rows, rows])
-        next_log_prob, log_prob = both_log_prob.split([rows, rows])
+        summaries = encode(encoders, torch.cat([tokens, next_tokens]))
+        critic_language = summaries[0, : tokens.shape[0]]
+        next_target_language = summaries[-1, tokens.shape[0] :].detach()
+        actor_language, next_actor_language = (summaries[1] if own_encoder else summaries[0].detach()).chunk(2)
 
         # Critic: regress on the soft Bellman target of the target critic and the current policy.
         with torch.no_grad():
+            next_action, next_log_prob = self.actor.sample(next_obs, next_actor_language, self.generator, next_present)
             next_q = self.target_critic(next_obs, next_target_language, next_action, next_present)
             target_q = reward + discount * not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
             if batch.failed.any():  # a lost episode (an object dropped) is worth failing for ever
-                target_q = target_q + discount * failed * (FAILURE_REWARD / (1.0 - s.gamma))
+                target_q = target_q + discount * self._tensor(batch.failed, torch.float32) * (FAILURE_REWARD / (1.0 - s.gamma))
             if s.clip_target:
                 target_q = target_q.clamp(FAILURE_REWARD / (1.0 - s.gamma), SUCCESS_REWARD)
-        critic_scores = None if self.critic.reader is None else self.critic.reader.scores(obs, critic_language, present)
+        # Object-wise readers weigh the objects once per network: the same attention serves the networks and
+        # the grounding loss.
+        critic_scores = actor_scores = None
+        if self.critic.reader is not None and self.actor.reader is not None:
+            critic_scores = self.critic.reader.scores(obs, critic_language, present)
+            actor_scores = self.actor.reader.scores(obs, actor_language, present)
         observed = self.critic.observe(obs, critic_language, present, critic_scores)
         q = self.critic.value(observed, action)
         critic_loss = (q - target_q).pow(2).mean(dim=1).sum()
 
         # Actor: maximise the critic's value plus entropy. The critic judges the policy's actions in the states
         # it has just read (detached) and is frozen meanwhile, so this loss sends gradient to the actor only.
+        pi_action, log_prob = self.actor.sample(obs, actor_language, self.generator, present, actor_scores)
         self.critic.requires_grad_(False)
         q_pi = self.critic.value(observed.detach(), pi_action).min(dim=0).values
         self.critic.requires_grad_(True)
         actor_loss = (alpha * log_prob - q_pi).mean()
 
-        actor_scores = None if both_actor_scores is None else both_actor_scores[:, rows:]
         grounding_loss = attention_loss(critic_scores, actor_scores, batch.label, s.grounding, self.device)
 
         # Temperature: raise alpha when the policy's entropy falls below the target, lower it above. (Without

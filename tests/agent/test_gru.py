@@ -31,7 +31,7 @@ def _ours(
     tables = torch.stack([e.weight @ g.weight_ih_l0.t() + g.bias_ih_l0 for e, g in zip(embeddings, grus)])
     weight_hh = torch.stack([g.weight_hh_l0 for g in grus])
     bias_hh = torch.stack([g.bias_hh_l0 for g in grus])
-    return read_sentences(tables, weight_hh, bias_hh, tokens.numpy(), pad_id=0, trained=trained)
+    return read_sentences(tables, weight_hh, bias_hh, tokens, pad_id=0, trained=trained)
 
 
 def _reference(embeddings: list[nn.Embedding], grus: list[nn.GRU], tokens: torch.Tensor) -> torch.Tensor:

@@ -2,11 +2,8 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from lanrocli.agent.encoder import LanguageEncoder, _summarise, encode
 from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, ObjectLayout, SceneReader
@@ -53,7 +50,7 @@ def test_repeated_sentences_give_the_gradients_of_encoding_every_row() -> None:
     weights = torch.randn(tokens.shape[0], 32)
     shared, reference = _encoder(), _encoder()
     (shared(tokens) * weights).sum().backward()
-    (_summarise([reference], tokens.numpy())[0] * weights).sum().backward()
+    (_summarise([reference], tokens)[0] * weights).sum().backward()
     for a, b in zip(shared.parameters(), reference.parameters()):
         torch.testing.assert_close(a.grad, b.grad)
 
@@ -61,7 +58,7 @@ def test_repeated_sentences_give_the_gradients_of_encoding_every_row() -> None:
 def test_encoding_together_gives_each_encoders_own_summaries() -> None:
     first, second = _encoder(0), _encoder(1)
     tokens = torch.cat([_sentences(20), torch.zeros(2, VOCAB.max_length, dtype=torch.int64)])
-    together = encode([first, second], tokens.numpy())
+    together = encode([first, second], tokens)
     torch.testing.assert_close(together[0], first(tokens))
     torch.testing.assert_close(together[1], second(tokens))
 
@@ -93,27 +90,6 @@ def test_actor_log_prob_is_the_density_of_the_squashed_gaussian() -> None:
     expected = squashed.log_prob(action).sum(dim=1)
     torch.testing.assert_close(log_prob[inside], expected[inside], rtol=1e-4, atol=1e-3)
     assert action.abs().max() <= 1.0
-
-
-def test_log_prob_and_its_gradients_are_those_of_its_terms_written_out() -> None:
-    """``sample`` sums the density's terms regrouped (constants once per row, no products with Python
-    numbers); its actions, log-probabilities and their gradients are those of the terms one by one."""
-    actor = _actor().double()
-    obs, language = torch.randn(64, 6, dtype=torch.float64), torch.randn(64, 32, dtype=torch.float64)
-    action, log_prob = actor.sample(obs, language, torch.Generator().manual_seed(1))
-    mean, log_std = actor(obs, language)
-    noise = torch.randn(mean.shape, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
-    u = mean + log_std.exp() * noise
-    gaussian = (-0.5 * noise.pow(2) - log_std - 0.5 * math.log(2 * math.pi)).sum(dim=1)
-    log_det = (2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))).sum(dim=1)
-    expected = gaussian - log_det
-    torch.testing.assert_close(action, torch.tanh(u))
-    torch.testing.assert_close(log_prob, expected)
-    parameters = list(actor.parameters())
-    mine = torch.autograd.grad((log_prob * action[:, 0]).sum(), parameters)
-    theirs = torch.autograd.grad((expected * torch.tanh(u)[:, 0]).sum(), parameters)
-    for a, b in zip(mine, theirs):
-        torch.testing.assert_close(a, b)
 
 
 def test_deterministic_action_is_the_squashed_mean() -> None:

@@ -174,10 +174,9 @@ def test_grounding_loss_is_zero_without_readers_weight_or_relabelled_rows() -> N
 def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
     architecture: str, depth: int, grounding: float, trunk: bool, rest: bool
 ) -> None:
-    """The update shares work between the losses (one pass of the encoders, one pass of the actor over the
-    next states and this batch's, the readers' attention computed once for the networks and the grounding
-    loss, the critic's reading of the states reused for the policy's action, one backward pass); the
-    gradients must be those of the losses written out one by one."""
+    """The update shares work between the losses (one pass of the encoders, the readers' attention computed
+    once for the networks and the grounding loss, the critic's reading of the states reused for the policy's
+    action, one backward pass); the gradients must be those of the losses written out one by one."""
     rng = np.random.default_rng(0)
     agent = _agent(
         critics=2, architecture=architecture, hidden_layers=depth, grounding=grounding, sentence_in_trunk=trunk,
