@@ -2,9 +2,9 @@
 
 A network asked one observation at a time pays its fixed cost per call for every step of every episode.
 Run side by side, the episodes in progress are answered in one batch per step (a policy with
-``act_batch``), which costs little more than one of them. Episode ``i`` is
-always reset with seed ``first + i`` and its result is reported in index order, so side by side or not, a
-policy meets the same episodes and a stopping rule stops at the same one.
+``act_batch``), which costs little more than one of them. Episode ``i`` is always reset with seed
+``first + i`` and its result is reported in index order, so side by side or not, a policy meets the same
+episodes and a stopping rule stops at the same one.
 """
 
 from __future__ import annotations

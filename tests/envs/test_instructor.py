@@ -286,7 +286,7 @@ def chain_episode(seed: int, max_corrections: int) -> tuple[Instructor, Scene, l
 def test_a_chain_of_corrections_singles_out_the_goal_among_what_is_left_each_time() -> None:
     from lanrocli.envs.instructor import MAX_CORRECTIONS
     from lanrocli.language import max_sentence_words
-    from lanrocli.language.dialogue import candidates, matching
+    from lanrocli.language.dialogue import candidates
 
     lengths = {1: 0, 2: 0}
     for seed in range(300):

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 from lanrocli.cli import app
 from lanrocli.train.checkpoint import resolve_checkpoint
-from lanrocli.train.pretrained import PROVENANCE, agent_path, export_agent, packaged_agents, provenance
+from lanrocli.train.pretrained import agent_path, export_agent, packaged_agents, provenance
 from lanrocli.train.errors import CheckpointError
 from lanrocli.train.runfolder import CORRECTION_TEST, SPLITS, read_pointer, step_checkpoint
 from lanrocli.train.testset import measure
