@@ -1,8 +1,10 @@
-"""Evaluation throughput: a trained agent's test episodes one after another against ``SIDE_BY_SIDE`` at a
-time (the way runs and ``lanro eval`` play them), alternating rounds, with the environments built before
-the clock starts. Prints environment steps per second of each, the ratio, and in how many episodes the two
-disagree: a batch rounds the network's arithmetic differently in the last bit, which changes the outcome of
-an occasional episode (a scripted policy gives identical results; ``tests/envs/test_rollout.py``).
+"""Evaluation throughput: a trained agent's test episodes one after another, ``SIDE_BY_SIDE`` at a time in
+this process, and ``SIDE_BY_SIDE`` at a time each in a worker process (the way runs and ``lanro eval``
+play them), alternating rounds, with the environments built before the clock starts. Prints environment
+steps per second of each, the ratios to one after another, and in how many episodes they disagree: a batch
+rounds the network's arithmetic differently in the last bit, which changes the outcome of an occasional
+episode (a scripted policy gives identical results; ``tests/envs/test_rollout.py``). Side by side in this
+process and in workers, the agent sees the same batches, so those two agree exactly.
 
     python benchmarks/evaluation_throughput.py --episodes 100 --rounds 3          # the shipped push agent
     python benchmarks/evaluation_throughput.py runs/push-s0 --correction-episodes  # any checkpoint
@@ -11,6 +13,7 @@ an occasional episode (a scripted policy gives identical results; ``tests/envs/t
 from __future__ import annotations
 
 import argparse
+import functools
 import statistics
 import time
 from pathlib import Path
@@ -19,6 +22,7 @@ import torch
 
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.evaluation import SIDE_BY_SIDE, EvaluationReport, evaluate
+from lanrocli.envs.workers import make_envs
 from lanrocli.train.pretrained import agent_path
 from lanrocli.train.seeds import held_out_seed
 from lanrocli.train.trainer import load_policy
@@ -38,29 +42,33 @@ def main() -> None:
     if args.correction_episodes:
         env_settings = env_settings.replace(correction_rate=1.0)
 
-    def make() -> LanroEnv:
-        return LanroEnv(
-            settings.task, env_settings, object_slots=settings.slots, vocabulary=policy.vocabulary, holdout=settings.holdout
-        )
-
+    make = functools.partial(
+        LanroEnv, settings.task, env_settings, object_slots=settings.slots, vocabulary=policy.vocabulary, holdout=settings.holdout
+    )
     first = held_out_seed(settings.seed, settings.stage)
-    alone, together = [make()], [make() for _ in range(SIDE_BY_SIDE)]
-    rates: dict[int, list[float]] = {1: [], SIDE_BY_SIDE: []}
-    reports: dict[int, EvaluationReport] = {}
+    ways = {
+        "one after another": make_envs(make, 1, in_workers=False),
+        f"{SIDE_BY_SIDE} side by side": make_envs(make, SIDE_BY_SIDE, in_workers=False),
+        f"{SIDE_BY_SIDE} side by side in workers": make_envs(make, SIDE_BY_SIDE, in_workers=True),
+    }
+    rates: dict[str, list[float]] = {way: [] for way in ways}
+    reports: dict[str, EvaluationReport] = {}
     for _ in range(args.rounds):
-        for envs in (alone, together):
+        for way, envs in ways.items():
             start = time.perf_counter()
-            reports[len(envs)] = report = evaluate(envs, policy, args.episodes, first)
-            rates[len(envs)].append(sum(r.length for r in report.results) / (time.perf_counter() - start))
-    for env in [*alone, *together]:
+            reports[way] = report = evaluate(envs, policy, args.episodes, first)
+            rates[way].append(sum(r.length for r in report.results) / (time.perf_counter() - start))
+    for env in [env for envs in ways.values() for env in envs]:
         env.close()
 
-    one, many = (statistics.median(rates[n]) for n in (1, SIDE_BY_SIDE))
-    print(f"one after another: {one:.0f} env steps/s; {SIDE_BY_SIDE} side by side: {many:.0f} env steps/s")
-    print(f"ratio: {many / one:.2f}x (rounds: {', '.join(f'{b / a:.2f}x' for a, b in zip(rates[1], rates[SIDE_BY_SIDE]))})")
-    a, b = reports[1], reports[SIDE_BY_SIDE]
-    differing = sum(x.success != y.success for x, y in zip(a.results, b.results))
-    print(f"success {a.overall.value:.3f} against {b.overall.value:.3f}; outcomes differ in {differing} of {args.episodes}")
+    base = next(iter(ways))
+    for way in ways:
+        ratios = ", ".join(f"{b / a:.2f}x" for a, b in zip(rates[base], rates[way]))
+        line = f"{way}: {statistics.median(rates[way]):.0f} env steps/s"
+        if way != base:
+            line += f", {statistics.median(rates[way]) / statistics.median(rates[base]):.2f}x (rounds: {ratios})"
+        differing = sum(x.success != y.success for x, y in zip(reports[base].results, reports[way].results))
+        print(f"{line}; success {reports[way].overall.value:.3f}, outcomes differing from one after another: {differing}")
 
 
 if __name__ == "__main__":

@@ -91,12 +91,15 @@ class Episode:
         """The observation as the policy sees it, its sentence replaced where the episode says so."""
         return self.observation if self.tokens is None else {**self.observation, "instruction": self.tokens}
 
-    def step(self, action: np.ndarray, weights: np.ndarray | None) -> EpisodeResult | None:
-        """Take ``action`` (chosen on :attr:`shown`, with the policy's attention ``weights`` there); the
-        episode's result once it has ended, else None."""
+    def attend(self, weights: np.ndarray | None) -> None:
+        """Tally the policy's attention ``weights`` on the observation about to be acted on."""
         if weights is not None:
             self.shares.setdefault(_phase(self.info), []).append(float(weights[self.target]))
-        self.observation, _, terminated, truncated, self.info = self.env.step(action)
+
+    def stepped(self, outcome: tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]) -> EpisodeResult | None:
+        """Take in what the environment's ``step`` returned for the action chosen on :attr:`shown`; the
+        episode's result once it has ended, else None."""
+        self.observation, _, terminated, truncated, self.info = outcome
         achieved = bool(self.info["achieved"][self.target])
         self.total += reward(achieved)
         self.length += 1
@@ -133,6 +136,16 @@ def _decide(policies: Sequence[Policy], episodes: Sequence[Episode]) -> list[tup
     return decisions
 
 
+def _step(envs: Sequence[LanroEnv], actions: Sequence[np.ndarray]) -> list[tuple]:
+    """Each environment's ``step`` outcome; environments in workers (:mod:`lanrocli.envs.workers`) all
+    start stepping before the first is waited for, so their physics runs on several cores at once."""
+    if all(hasattr(env, "step_async") for env in envs):
+        for env, action in zip(envs, actions):
+            env.step_async(action)
+        return [env.step_wait() for env in envs]
+    return [env.step(action) for env, action in zip(envs, actions)]
+
+
 def run_episodes(
     envs: Sequence[LanroEnv],
     policy: Policy,
@@ -162,9 +175,11 @@ def run_episodes(
                 running[k], started = (started, episode), started + 1
         slots = sorted(running)
         decisions = _decide([policies[k] for k in slots], [running[k][1] for k in slots])
-        for k, (action, weights) in zip(slots, decisions):
+        for k, (_, weights) in zip(slots, decisions):
+            running[k][1].attend(weights)
+        for k, outcome in zip(slots, _step([envs[k] for k in slots], [action for action, _ in decisions])):
             index, episode = running[k]
-            result = episode.step(action, weights)
+            result = episode.stepped(outcome)
             if result is not None:
                 finished[index] = result
                 del running[k]

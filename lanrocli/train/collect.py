@@ -10,10 +10,6 @@ run continues the same episodes instead of starting new ones.
 from __future__ import annotations
 
 import multiprocessing
-import os
-import signal
-import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -25,24 +21,9 @@ from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
 
 from lanrocli.agent.transitions import EpisodeData
 from lanrocli.envs.env import LanroEnv
+from lanrocli.envs.workers import leave_signals_to_parent
 from lanrocli.language import ObjectProps
 from lanrocli.train.checkpoint import state_from_json, state_to_json
-
-
-PARENT_CHECK_SECONDS = 0.5
-
-
-def exit_with_parent(parent: int) -> None:
-    """End this process soon after process ``parent`` ends, however it ends (a SIGKILL included), so a
-    killed trainer leaves no environment worker behind: a watcher thread sees this process handed to
-    another parent and exits at once."""
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(PARENT_CHECK_SECONDS)
-        os._exit(1)
-
-    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
 @dataclass(frozen=True)
@@ -192,15 +173,12 @@ class Collector:
         make_env: Callable[[], LanroEnv], snapshot: EnvSnapshot | None, in_subprocess: bool
     ) -> Callable[[], TrainingEnv]:
         def build() -> TrainingEnv:
-            # Ctrl-C in a terminal, or a scheduler's SIGTERM, reaches the whole process group. The workers
-            # leave it to the main process, which stops cleanly and writes a checkpoint that needs them
-            # alive; if the main process dies without closing them, they exit on their own. (The vector env
-            # also builds one environment in the main process, to read its spaces: that one must not.)
+            # The workers leave a stop request to the main process, which writes a checkpoint that needs
+            # them alive. (The vector env also builds one environment in the main process, to read its
+            # spaces: that one must keep its signals.)
             parent = multiprocessing.parent_process()
             if in_subprocess and parent is not None and parent.pid is not None:
-                signal.signal(signal.SIGINT, signal.SIG_IGN)
-                signal.signal(signal.SIGTERM, signal.SIG_IGN)
-                exit_with_parent(parent.pid)
+                leave_signals_to_parent(parent.pid)
             return TrainingEnv(make_env(), snapshot)
 
         return build

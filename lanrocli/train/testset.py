@@ -12,6 +12,7 @@ enough corrections and negations were spoken (``CorrectionQuota``).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, replace
@@ -24,6 +25,7 @@ from lanrocli.choices import CorrectionForm, Instruction, Kind, Split
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.evaluation import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.envs.workers import make_envs
 from lanrocli.language.vocabulary import unlearned_words
 from lanrocli.train.checkpoint import resolve_checkpoint
 from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, SPLITS
@@ -122,18 +124,17 @@ def _run(
     enough: Callable[[EvaluationReport], bool] | None = None,
 ) -> EvaluationReport:
     settings = loaded.settings
-    envs = [
-        LanroEnv(
-            settings.task,
-            loaded.env,
-            object_slots=settings.slots,
-            render_mode="rgb_array" if gif else None,
-            vocabulary=loaded.policy.vocabulary,
-            holdout=settings.holdout,
-            split=loaded.split,
-        )
-        for _ in range(SIDE_BY_SIDE)
-    ]
+    make_env = functools.partial(
+        LanroEnv,
+        settings.task,
+        loaded.env,
+        object_slots=settings.slots,
+        render_mode="rgb_array" if gif else None,
+        vocabulary=loaded.policy.vocabulary,
+        holdout=settings.holdout,
+        split=loaded.split,
+    )
+    envs = make_envs(make_env, SIDE_BY_SIDE, in_workers=settings.envs > 1)  # where the run collected
     try:
         return evaluate(envs, loaded.policy, episodes, first, gif, progress, instruction, enough)
     finally:

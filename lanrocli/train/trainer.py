@@ -28,6 +28,7 @@ from lanrocli.choices import Task, check_device
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
 from lanrocli.envs.evaluation import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.envs.workers import EnvWorker, make_envs
 from lanrocli.language import Vocabulary, agent_vocabulary, grammar_vocabulary
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.sim import action_size
@@ -199,7 +200,7 @@ class Trainer:
         self.progress = Progress()
         self.last_metrics: dict[str, float] = {}
         self._collector: Collector | None = None
-        self._evaluation_envs: list[LanroEnv] = []
+        self._evaluation_envs: list[LanroEnv | EnvWorker] = []
         self._restore: tuple[list[dict[str, Any]], list[dict[str, np.ndarray]]] | None = None
         self._started = time.perf_counter()
         self._wall_before = 0.0
@@ -277,7 +278,8 @@ class Trainer:
         """The deterministic policy on evaluation episodes; episode i is reset with ``first_seed + i``. The
         environments are built once per stage: building one costs as much as a few episodes."""
         if not self._evaluation_envs:
-            self._evaluation_envs = [self.env_factory(evaluation=True)() for _ in range(SIDE_BY_SIDE)]
+            in_workers = self.settings.envs > 1  # evaluate where collection runs: in subprocesses when it does
+            self._evaluation_envs = make_envs(self.env_factory(evaluation=True), SIDE_BY_SIDE, in_workers)
         started = time.perf_counter()
         policy = AgentPolicy(self.agent, self.vocabulary)
         report = evaluate(self._evaluation_envs, policy, episodes or self.settings.eval_episodes, first_seed)
