@@ -36,8 +36,10 @@ class ReplayBuffer:
 
     ``pool_rows``: relabelling sentences drawn per object and style when an episode is added (fewer for
     episodes shorter than that, as the pool is stored in the episode's own slots). ``negations``: whether
-    corrected relabelling sentences may use ``not``; ``holdout``: what they may never say. ``seed`` drives those draws; the generator's state is
-    saved with the buffer so a resumed run draws the same sentences.
+    corrected relabelling sentences may use ``not``; ``holdout``: what they may never say; ``chain``: the
+    most corrections a relabelled sentence may chain, where the arm acted on several wrong objects (1: one
+    correction, as without chains). ``seed`` drives those draws; the generator's state is saved with the
+    buffer so a resumed run draws the same sentences.
 
     The arrays are allocated with ``np.zeros``, which the operating system backs with memory only as slots
     are first written, so a large capacity costs little until it fills.
@@ -54,6 +56,7 @@ class ReplayBuffer:
         negations: bool = True,
         seed: int = 0,
         holdout: Holdout = NOTHING_HELD_OUT,
+        chain: int = 1,
     ) -> None:
         vocabulary = vocabulary if vocabulary is not None else grammar_vocabulary()
         if len(vocabulary) > np.iinfo(np.uint8).max + 1:
@@ -68,6 +71,7 @@ class ReplayBuffer:
         self.pool_rows = pool_rows
         self.negations = negations
         self.holdout = holdout
+        self.chain = chain
         self.rng = np.random.default_rng(seed)
         self.position = 0  # next slot to write
         self.high = 0  # one past the highest slot ever written: samples are drawn below it
@@ -127,7 +131,10 @@ class ReplayBuffer:
         d["episode_length"][lo:hi] = steps
 
         rows = min(steps, self.pool_rows)
-        pool = sentence_pool(episode.task, objects, rows, self.vocabulary, self.negations, self.rng, self.holdout)
+        acted_on = [int(i) for i in np.argsort(d["first_achieved"][lo, :n], kind="stable") if ever[i]]
+        pool = sentence_pool(
+            episode.task, objects, rows, self.vocabulary, self.negations, self.rng, self.holdout, self.chain, acted_on
+        )
         d["identifiable"][lo:hi] = False
         d["identifiable"][lo:hi, :n] = pool.identifiable
         d["plain_pool"][lo:hi] = 0
@@ -212,7 +219,8 @@ class ReplayBuffer:
         already makes a transition that is won whatever the action); a transition left without one keeps
         its own sentence. A share ``correction_share`` of the relabelled sentences are corrections rather
         than plain instructions: those written for the object the arm acted on first in the episode,
-        other than the target (where there is none, another object drawn uniformly).
+        other than the target (where there is none, another object drawn uniformly), or, in a buffer that
+        relabels chains and where the arm acted on a second wrong object too, a correction of each.
 
         ``ground_real``: a stored transition whose sentence singles out its goal (every step of a plain
         episode, and the steps after the correction of a correction episode) is labelled with the goal
@@ -272,6 +280,7 @@ class ReplayBuffer:
             "pool_rows": self.pool_rows,
             "negations": self.negations,
             "holdout": self.holdout.to_dict(),
+            "chain": self.chain,
             "position": self.position,
             "high": self.high,
             "size": self.size,
@@ -295,6 +304,7 @@ class ReplayBuffer:
             pool_rows=meta["pool_rows"],
             negations=meta["negations"],
             holdout=Holdout.from_dict(meta.get("holdout")),
+            chain=meta.get("chain", 1),
         )
         high = meta["high"]
         for name, array in buffer.data.items():

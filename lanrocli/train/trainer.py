@@ -195,6 +195,7 @@ class Trainer:
             negations=settings.env.negations or settings.buffer.relabel_negations,
             seed=settings.seed,
             holdout=settings.holdout,
+            chain=settings.sentence_corrections if settings.buffer.relabel_chains else 1,
         )
         self.rng = np.random.default_rng(np.random.SeedSequence(settings.seed).spawn(2)[1])
         self.progress = Progress()

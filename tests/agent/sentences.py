@@ -102,3 +102,40 @@ def referents(parsed: Parsed, objects: Sequence[ObjectProps], knows_rare: bool =
         return kept or [i for i, o in enumerate(objects) if not corrected.fits(o)]
     kept = [i for i in fits if corrected.fits(objects[i])]
     return kept or [i for i, o in enumerate(objects) if corrected.fits(o)]
+
+
+def split_chain(text: str) -> tuple[str, list[str]]:
+    """The instruction of ``TASKVERB the OBJECT [BEGINNING the OBJECT]...`` and its corrections, in order."""
+    words = text.split()
+    instruction_words, rest = words[:4], words[4:]
+    corrections = []
+    while rest:
+        if "the" not in rest:
+            raise NotInGrammar(f"{text!r}: correction without 'the'")
+        end = rest.index("the") + 3
+        corrections.append(" ".join(rest[:end]))
+        rest = rest[end:]
+    return " ".join(instruction_words), corrections
+
+
+def chain_referents(
+    text: str, task: str, objects: Sequence[ObjectProps], acted_on: Sequence[int], knows_rare: bool = True
+) -> list[list[int]]:
+    """For each correction of a chain, the objects it designates: it works as a single correction does
+    (:func:`referents`), on the objects not ruled out by the corrections before it (the wrong objects the
+    arm had acted on, ``acted_on``, in order)."""
+    opening, corrections = split_chain(text)
+    designated = []
+    for index, spoken in enumerate(corrections):
+        parsed = parse(f"{opening} {spoken}", task)
+        ruled_out = set(acted_on[:index])
+        left = [i for i, o in enumerate(objects) if i not in ruled_out]
+        fits = [i for i in left if parsed.noun.fits(objects[i], knows_rare)]
+        assert parsed.corrected is not None
+        if parsed.beginning is CorrectionForm.NEGATION:
+            kept = [i for i in fits if not parsed.corrected.fits(objects[i])]
+            designated.append(kept or [i for i in left if not parsed.corrected.fits(objects[i])])
+        else:
+            kept = [i for i in fits if parsed.corrected.fits(objects[i])]
+            designated.append(kept or [i for i in left if parsed.corrected.fits(objects[i])])
+    return designated

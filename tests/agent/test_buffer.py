@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from collections.abc import Callable
 
 import numpy as np
@@ -13,9 +14,10 @@ from hypothesis import strategies as st
 from lanrocli.agent.buffer import ReplayBuffer
 from lanrocli.agent.transitions import Batch, EpisodeData
 from lanrocli.choices import CorrectionForm
+from lanrocli.language import grammar_vocabulary
 
 from .episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
-from .sentences import parse, referents
+from .sentences import chain_referents, parse, referents, split_chain
 
 
 def _filled(
@@ -401,3 +403,51 @@ def test_falls_fail_marks_the_step_that_dropped_an_object_unless_it_won() -> Non
     batch = buffer.sample(512, rng, relabel_ratio=0.5, falls_fail=True, n_step=3, gamma=0.9)
     dropped_last = buffer.data["fell"][batch.slots + batch.steps - 1]
     assert batch.failed.any() and not (batch.failed & ~dropped_last).any() and batch.done[batch.failed].all()
+
+
+CHAINS = grammar_vocabulary(2)
+
+
+def _two_mistakes_then_goal(rng: np.random.Generator, episode_id: int) -> EpisodeData:
+    """Three distinct objects; the arm acts on both wrong ones (in a random order) and then on the goal."""
+    episode = random_episode(rng, episode_id, steps=12)
+    while len(set(episode.objects)) < 3:
+        episode = random_episode(rng, episode_id, steps=12)
+    wrong = [int(i) for i in rng.permutation(3) if i != episode.goal_index]
+    achieved = np.zeros((12, 3), dtype=bool)
+    achieved[3:, wrong[0]] = True
+    achieved[7:, wrong[1]] = True
+    achieved[11, episode.goal_index] = True
+    tokens = np.pad(episode.instructions, ((0, 0), (0, CHAINS.max_length - VOCAB.max_length)))
+    return replace(
+        episode,
+        achieved=achieved,
+        rewards=np.where(achieved[:, episode.goal_index], 0.0, -1.0).astype(np.float32),
+        terminated=achieved[:, episode.goal_index].copy(),
+        instructions=tokens,
+        next_instructions=tokens.copy(),
+    )
+
+
+def test_a_buffer_that_relabels_chains_corrects_each_wrong_object_in_turn() -> None:
+    rng = np.random.default_rng(8)
+    episodes = {i: _two_mistakes_then_goal(rng, i) for i in range(60)}
+    corrections = {}
+    for chain in (1, 2):
+        buffer = ReplayBuffer(5000, OBS_DIM, ACTION_DIM, max_objects=3, vocabulary=CHAINS, seed=3, chain=chain)
+        for episode in episodes.values():
+            buffer.add_episode(episode)
+        batch = buffer.sample(512, np.random.default_rng(0), relabel_ratio=1.0, correction_share=1.0)
+        counts = []
+        for row in np.flatnonzero(batch.relabelled):
+            episode, _ = _origin(batch, row, episodes)
+            target = int(batch.named[row])  # the arm acted on all three: both others are wrong for any target
+            wrong = [int(i) for i in np.argsort(np.argmax(episode.achieved, axis=0)) if i != target]
+            text = CHAINS.decode(batch.instruction[row])
+            _, spoken = split_chain(text)
+            counts.append(len(spoken))
+            assert chain_referents(text, episode.task, episode.objects, wrong)[-1] == [target], text
+        corrections[chain] = counts
+    assert len(corrections[2]) > 100 and set(corrections[2]) == {2}
+    assert set(corrections[1]) == {1}
+    assert ReplayBuffer.from_state(*buffer.state()).chain == 2
