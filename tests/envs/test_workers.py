@@ -19,20 +19,21 @@ SETTINGS = EnvSettings(objects=3, mode="colour_shape", correction_rate=1.0, nega
 MAKE = functools.partial(LanroEnv, "push", SETTINGS)
 
 
-@pytest.fixture(scope="module")
-def local() -> Iterator[list[LanroEnv]]:
-    made = make_envs(MAKE, 3, in_workers=False)
+def _made(in_workers: bool) -> Iterator[list]:
+    made = make_envs(MAKE, 3, in_workers)
     yield made
     for env in made:
         env.close()
 
 
 @pytest.fixture(scope="module")
+def local() -> Iterator[list[LanroEnv]]:
+    yield from _made(in_workers=False)
+
+
+@pytest.fixture(scope="module")
 def workers() -> Iterator[list[EnvWorker]]:
-    made = make_envs(MAKE, 3, in_workers=True)
-    yield made
-    for worker in made:
-        worker.close()
+    yield from _made(in_workers=True)
 
 
 def test_make_envs_puts_each_environment_where_asked(local: list[LanroEnv], workers: list[EnvWorker]) -> None:
