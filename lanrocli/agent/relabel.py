@@ -13,9 +13,9 @@ agent that an ambiguous sentence means one particular object. Two styles:
   an object the instruction named ("push the red cube not the red cube": an instruction correction) and of
   one it never named ("push the blue cube not the red cube": the arm's own mistake) included.
 
-Where the arm acted on two wrong objects before the target and the run speaks chains of corrections, a
-*chained* sentence corrects it once per wrong object, in the order it acted on them, each correction singling
-out the target among the candidates not ruled out yet: the instructor's rule for a chain.
+Where the arm acted on two objects other than the target and the run speaks chains of corrections, a
+*chained* sentence corrects it once for each, in the order it acted on them, each correction singling out
+the target among the candidates not ruled out yet: the instructor's rule for a chain.
 
 The buffer draws a few of each per object (and, for corrections, per touched object) when an episode is
 added, so that relabelling at sample time is only array indexing.

@@ -140,10 +140,10 @@ class BufferSettings:
     """Relabelled corrections may be negations in every stage, not only in those whose instructor speaks
     them: an agent then meets "not the ..." from its first stage on."""
     relabel_chains: bool = False
-    """Where the arm acted on two wrong objects before doing the task on a relabelling target, and a stage
-    speaks chains of corrections (``max_corrections`` 2), the relabelled correction is that chain: one
-    correction per wrong object, each singling out the target among what is left. Without it a relabelled
-    sentence never holds a second correction, which real episodes then hear only after the agent's own
+    """Where the arm acted on two objects other than a relabelling target, the relabelled correction is a
+    chain: one correction for each, in the order the arm acted on them, each singling out the target among
+    what is left (a curriculum must have a stage with ``max_corrections`` 2). Without it a relabelled
+    sentence never holds a second correction, which real episodes then speak only after the agent's own
     second mistake."""
     fresh_targets: bool = False
     """Relabel only to objects the task did not already hold for before the step: a transition relabelled to

@@ -127,6 +127,17 @@ class Curriculum(BaseModel):
                 raise ValueError(f"stages[{index}].env: {error}") from None
         return stages
 
+    @field_validator("stages")
+    @classmethod
+    def _chains_to_relabel(cls, stages: list[Stage], info: ValidationInfo) -> list[Stage]:
+        buffer = info.data.get("buffer")  # absent when the buffer section itself failed validation
+        if buffer is not None and buffer.relabel_chains and max(stage.env.max_corrections for stage in stages) < 2:
+            raise ValueError(
+                "buffer.relabel_chains relabels chains of corrections, which no stage speaks: give a stage "
+                "max_corrections: 2, or leave relabel_chains out"
+            )
+        return stages
+
     @field_validator("holdout")
     @classmethod
     def _holdout_fits_the_stages(cls, holdout: HoldoutConfig, info: ValidationInfo) -> HoldoutConfig:

@@ -205,6 +205,14 @@ def test_duplicate_stage_names(tmp_path: Path) -> None:
     assert "stages[0] and stages[2] are both named 'first'" in problem.message
 
 
+def test_relabelled_chains_need_a_stage_that_speaks_chains(tmp_path: Path) -> None:
+    text = MINIMAL.replace("stages:", "buffer: {relabel_chains: true}\nstages:")
+    problem = only_problem(write(tmp_path, "c.yaml", text))
+    assert problem.path == "stages" and "give a stage max_corrections: 2" in problem.message
+    chains = load_curriculum(write(tmp_path, "d.yaml", text + "    env: {objects: 3, max_corrections: 2}\n"))
+    assert chains.buffer.relabel_chains and chains.max_corrections == 2
+
+
 def test_stage_name_must_be_usable_as_a_folder(tmp_path: Path) -> None:
     problem = only_problem(write(tmp_path, "c.yaml", MINIMAL.replace("name: first", "name: ../up")))
     assert (problem.line, problem.path) == (4, "stages[0].name")
