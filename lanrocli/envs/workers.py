@@ -67,10 +67,10 @@ def _serve(connection: Connection, make_env: Callable[[], LanroEnv], parent: int
         connection.send(("error", traceback.format_exc()))
         return
     connection.send(("ok", (env.task.name, env.vocabulary, env.metadata, env.render_mode)))
-    calls: dict[str, Callable[..., Any]] = {
+    calls: dict[str, Callable[[Any], Any]] = {
         "reset": lambda seed: env.reset(seed=seed),
         "step": env.step,
-        "render": env.render,
+        "render": lambda _: env.render(),
     }
     while True:
         name, argument = connection.recv()
@@ -79,7 +79,7 @@ def _serve(connection: Connection, make_env: Callable[[], LanroEnv], parent: int
             connection.close()
             return
         try:
-            reply = calls[name]() if argument is None else calls[name](argument)
+            reply = calls[name](argument)
         except Exception:
             connection.send(("error", traceback.format_exc()))
         else:
