@@ -82,7 +82,9 @@ class _Scene:
             opening_phrases(kind, self.objects, target, named), None
         ))
 
-    def negations(self, kind: Kind, phrase: Phrase, target: int, touched: int, ruled_out: frozenset[int]) -> list[Phrase]:
+    def negations(
+        self, kind: Kind, phrase: Phrase, target: int, touched: int, ruled_out: frozenset[int]
+    ) -> list[Phrase]:
         return self._get(("not", kind, phrase, target, touched, ruled_out), lambda: self.holdout.correction_phrases(
             negation_phrases(self.objects, target, touched, candidates(kind, phrase, self.objects) - ruled_out), None
         ))
@@ -126,8 +128,17 @@ def corrected_sentence(
 
 
 def _correction(
-    scene: _Scene, kind: Kind, phrase: Phrase, target: int, touched: int, ruled_out: frozenset[int], negations: bool, v: np.ndarray
+    scene: _Scene,
+    kind: Kind,
+    phrase: Phrase,
+    target: int,
+    touched: int,
+    ruled_out: frozenset[int],
+    negations: bool,
+    v: np.ndarray,
 ) -> str:
+    """One correction after the arm acted on ``touched``, singling out ``target`` among the candidates
+    that ``ruled_out`` leaves, chosen by the draws ``v`` (form, beginning words, phrase)."""
     form = _pick(correction_forms(negations), v[0])
     if form is CorrectionForm.NEGATION:
         negated = scene.negations(kind, phrase, target, touched, ruled_out)
@@ -185,6 +196,7 @@ def sentence_pool(
                 corrected[:, k, j] = vocabulary.encode_many(texts)
         wrong = [int(i) for i in acted_on if i != k][:chain]
         if len(wrong) > 1:
-            texts = (corrected_sentence(verbs, scene, k, wrong, negations, u) for u in rng.random((rows, _draws(len(wrong)))))
+            chain_draws = rng.random((rows, _draws(len(wrong))))
+            texts = (corrected_sentence(verbs, scene, k, wrong, negations, u) for u in chain_draws)
             corrected[:, k, wrong[0]] = vocabulary.encode_many(texts)
     return SentencePool(plain, corrected, identifiable)

@@ -134,7 +134,7 @@ def _run(
         holdout=settings.holdout,
         split=loaded.split,
     )
-    envs = make_envs(make_env, SIDE_BY_SIDE, in_workers=settings.envs > 1)  # where the run collected
+    envs = make_envs(make_env, SIDE_BY_SIDE, settings.in_workers)
     try:
         return evaluate(envs, loaded.policy, episodes, first, gif, progress, instruction, enough)
     finally:

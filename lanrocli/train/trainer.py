@@ -94,6 +94,12 @@ class TrainSettings:
         return max(self.max_corrections or 1, self.env.max_corrections)
 
     @property
+    def in_workers(self) -> bool:
+        """Whether the run's environments live in subprocesses: several collecting at once do, and then
+        its evaluation and test environments do too, one each."""
+        return self.envs > 1
+
+    @property
     def slots(self) -> int:
         return self.object_slots if self.object_slots is not None else self.env.objects
 
@@ -279,8 +285,7 @@ class Trainer:
         """The deterministic policy on evaluation episodes; episode i is reset with ``first_seed + i``. The
         environments are built once per stage: building one costs as much as a few episodes."""
         if not self._evaluation_envs:
-            in_workers = self.settings.envs > 1  # evaluate where collection runs: in subprocesses when it does
-            self._evaluation_envs = make_envs(self.env_factory(evaluation=True), SIDE_BY_SIDE, in_workers)
+            self._evaluation_envs = make_envs(self.env_factory(evaluation=True), SIDE_BY_SIDE, self.settings.in_workers)
         started = time.perf_counter()
         policy = AgentPolicy(self.agent, self.vocabulary)
         report = evaluate(self._evaluation_envs, policy, episodes or self.settings.eval_episodes, first_seed)
