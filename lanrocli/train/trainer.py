@@ -95,8 +95,7 @@ class TrainSettings:
 
     @property
     def in_workers(self) -> bool:
-        """Whether the run's environments live in subprocesses: several collecting at once do, and then
-        its evaluation and test environments do too, one each."""
+        """Whether environments run in subprocesses: several collecting do, and then measurement's too."""
         return self.envs > 1
 
     @property
@@ -193,9 +192,7 @@ class Trainer:
             obs_dim, action_dim, len(self.vocabulary), agent_settings, settings.seed, self.device, layout
         )
         self.buffer = ReplayBuffer(
-            settings.buffer.size,
-            obs_dim,
-            action_dim,
+            settings.buffer.size, obs_dim, action_dim,
             max_objects=settings.slots,
             vocabulary=self.vocabulary,
             negations=settings.env.negations or settings.buffer.relabel_negations,
