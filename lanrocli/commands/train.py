@@ -61,6 +61,15 @@ def train_command(
         str | None, typer.Option(callback=device_option, help="cpu, cuda or cuda:N (default: cuda if available).")
     ] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the run in --out where it stopped.")] = False,
+    source: Annotated[
+        Path | None,
+        typer.Option(
+            "--from",
+            metavar="RUN",
+            help="Begin where the run in RUN ended the stage before the first in which its curriculum and this one "
+            "differ (they may differ in their stages alone): its earlier stages are copied, not trained again.",
+        ),
+    ] = None,
     quick: Annotated[
         bool,
         typer.Option(
@@ -83,6 +92,8 @@ def train_command(
     if curriculum is None and not quick and not resume:
         raise fail("give a curriculum (a YAML file, or a packaged one by name: 'lanro check' lists them), or --quick "
                    "for the built-in one")
+    if source is not None and (resume or curriculum is None and not quick):
+        raise fail("--from starts a new run from another run's stages: give the curriculum to run, without --resume")
     if curriculum is None and not quick and changes:
         raise fail("--set needs the curriculum it applies to; a resumed run keeps the settings it started with")
     plan = None if curriculum is None and resume and not quick else load_plan(curriculum, quick, seed, envs, changes)
@@ -91,6 +102,7 @@ def train_command(
     import torch
 
     from lanrocli.display import StopRequest, TrainingDisplay
+    from lanrocli.train.branch import branch
     from lanrocli.train.checkpoint import CheckpointWriteError
     from lanrocli.train.curriculum import CurriculumError
     from lanrocli.train.errors import RunError
@@ -110,6 +122,9 @@ def train_command(
     try:
         if resume:
             run = CurriculumRun.resume(out, plan, torch_device, display)
+        elif source is not None:
+            assert plan is not None
+            run = branch(plan, source, out, torch_device, display)
         else:
             assert plan is not None
             run = CurriculumRun.start(plan, out, torch_device, display)

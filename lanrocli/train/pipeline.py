@@ -108,16 +108,8 @@ class CurriculumRun:
     ) -> CurriculumRun:
         """A new run in ``out``, which must not exist, be empty, or hold only what a run killed before its
         first checkpoint left (which is removed): a run with a checkpoint is never overwritten."""
-        if out.exists() and not out.is_dir():
-            raise RunError(f"{out} is a file, not a run folder; choose another folder with --out")
-        lock = RunLock(out)
+        lock, notes = claim_folder(out)
         with released_on_error(lock):
-            entries = [entry for entry in out.iterdir() if entry.name != LOCK]
-            if not all(is_leftover(entry) for entry in entries):
-                raise RunError(
-                    f"{out} is not empty. Continue the run there with --resume, or choose another folder with --out."
-                )
-            notes = [f"{out} held a run stopped before its first checkpoint: starting it over"] if entries else []
             return cls._begin(curriculum, out, device, observer, lock, notes)
 
     @classmethod
@@ -188,7 +180,7 @@ class CurriculumRun:
                 used = self.trainer.progress.env_steps - start
                 target = start + min((used // every + 1) * every, stage.budget.steps)
                 if not self.trainer.run(target, should_stop, self._on_step):
-                    self._checkpoint(stage_index=self.state.stage, best=False)
+                    self.save_checkpoint()
                     return False
                 self._evaluate(stage, should_stop)
         except TestsStopped:
@@ -313,10 +305,27 @@ class CurriculumRun:
         best_agent = self.trainer.save(folder / best_checkpoint(steps), extra, resumable=False) if best else None
         publish(self.out, last, best_agent)
 
+    def save_checkpoint(self) -> None:
+        """A resumable checkpoint of the run as it stands, in its current stage's folder."""
+        self._checkpoint(stage_index=self.state.stage, best=False)
+
     def close(self) -> None:
         self.trainer.close()
         self._tensorboard.close()
         self._lock.release()
+
+
+def claim_folder(out: Path) -> tuple[RunLock, list[str]]:
+    """The lock on ``out`` for a new run, and what the user should know; ``out`` must not exist, be empty,
+    or hold only what a run killed before its first checkpoint left (removed later, by the new run)."""
+    if out.exists() and not out.is_dir():
+        raise RunError(f"{out} is a file, not a run folder; choose another folder with --out")
+    lock = RunLock(out)
+    with released_on_error(lock):
+        entries = [entry for entry in out.iterdir() if entry.name != LOCK]
+        if not all(is_leftover(entry) for entry in entries):
+            raise RunError(f"{out} is not empty. Continue the run there with --resume, or choose another folder with --out.")
+    return lock, [f"{out} held a run stopped before its first checkpoint: starting it over"] if entries else []
 
 
 def _train_settings(curriculum: Curriculum) -> TrainSettings:
