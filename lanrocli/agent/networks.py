@@ -83,10 +83,7 @@ class SceneReader(nn.Module):
     summary of all objects kept the agent near 0.3 training success for 20k steps, while the named object
     alone reached 0.8 within 5k (``benchmarks/point_reach.py``, seed 0). But after a correction the arm is
     often still at the wrong object, which the named object alone hides: with ``rest`` the reader adds the
-    objects the attention leaves, weighed by how much it leaves each (:attr:`SACSettings.see_rest`), through
-    a learned gate that starts closed. Shown the rest at full strength from the first update, reach's agents
-    learned their first stage several times more slowly (docs/corrections.md); with the gate at zero the
-    network starts as the one without the rest, and opens it as far as the losses ask.
+    objects the attention leaves, weighed by how much it leaves each (:attr:`SACSettings.see_rest`).
 
     ``members`` independent readers run together, one per critic of an ensemble; the output is
     [members, B, arm + object (+ object)]: the arm's features, then the named object's (then the rest's).
@@ -99,7 +96,6 @@ class SceneReader(nn.Module):
         self.query = EnsembleLinear(members, language_size, width)
         self.members = members
         self.rest = rest
-        self.rest_gate = nn.Parameter(torch.zeros(members, 1, 1)) if rest else None
         self.output_size = layout.arm + layout.object * (2 if rest else 1)
 
     def scores(self, obs: torch.Tensor, language: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
@@ -124,13 +120,13 @@ class SceneReader(nn.Module):
         arm, objects = self.layout.split(obs)
         weights = (self.scores(obs, language, present) if scores is None else scores).softmax(dim=-1)
         named = (weights.unsqueeze(-1) * objects).sum(dim=-2)
-        if self.rest_gate is None:
+        if not self.rest:
             return torch.cat([arm.expand(self.members, -1, -1), named], dim=2)
         # The objects the attention leaves, weighed by how much it leaves them: the one other object of a
         # pair, the mean of the others of three; zeros where the named object is alone.
         left = (1.0 - weights) * present
         left = left / left.sum(dim=-1, keepdim=True).clamp(min=1e-6)
-        rest = self.rest_gate * (left.unsqueeze(-1) * objects).sum(dim=-2)
+        rest = (left.unsqueeze(-1) * objects).sum(dim=-2)
         return torch.cat([arm.expand(self.members, -1, -1), named, rest], dim=2)
 
 

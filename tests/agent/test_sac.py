@@ -127,21 +127,14 @@ def test_grounding_loss_teaches_every_reader_which_object_a_sentence_names() -> 
     assert metrics["grounding_loss"] < 0.2
 
 
-def test_the_rest_is_the_object_the_attention_leaves_behind_a_gate_that_starts_closed() -> None:
+def test_the_rest_is_the_object_the_attention_leaves() -> None:
     agent = _agent(architecture="objects", see_rest=True)
     reader = agent.actor.reader
     obs = torch.as_tensor(np.random.default_rng(0).normal(size=(3, OBS_DIM)), dtype=torch.float32)
     arm, objects = LAYOUT.split(obs)
     present = torch.tensor([[True, True], [True, True], [True, False]])
     scores = torch.tensor([[[30.0, 0.0], [0.0, 30.0], [0.0, torch.finfo(torch.float32).min]]])
-    language = torch.zeros(3, agent.settings.language_size)
-    closed = reader(obs, language, present, scores)[0]
-    assert not closed[:, LAYOUT.arm + LAYOUT.object :].any()  # a new agent starts as one without the rest
-    closed.sum().backward()
-    assert reader.rest_gate.grad is not None and reader.rest_gate.grad.abs().sum() > 0  # ... and can open it
-    with torch.no_grad():
-        reader.rest_gate.fill_(1.0)
-    out = reader(obs, language, present, scores)[0]
+    out = reader(obs, torch.zeros(3, agent.settings.language_size), present, scores)[0]
     named, rest = out[:, LAYOUT.arm : LAYOUT.arm + LAYOUT.object], out[:, LAYOUT.arm + LAYOUT.object :]
     assert torch.allclose(named[0], objects[0, 0], atol=1e-5) and torch.allclose(rest[0], objects[0, 1], atol=1e-5)
     assert torch.allclose(named[1], objects[1, 1], atol=1e-5) and torch.allclose(rest[1], objects[1, 0], atol=1e-5)
@@ -190,10 +183,6 @@ def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
         see_rest=rest,
     )
     agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
-    if rest:  # opened, so that the rest's path carries gradient too
-        with torch.no_grad():
-            for reader in (agent.actor.reader, agent.critic.reader, agent.target_critic.reader):
-                reader.rest_gate.fill_(0.5)
     batch = _grounding_batch(rng)
     batch.named[::3] = -1  # not relabelled: no grounding label
     reference = SACAgent.from_state_dict(agent.state_dict())
