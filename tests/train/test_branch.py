@@ -11,6 +11,7 @@ from lanrocli.train.curriculum import load_curriculum
 from lanrocli.train.errors import RunError
 from lanrocli.train.pipeline import CurriculumRun
 from lanrocli.train.runfolder import CONFIG
+from lanrocli.train.writing import TMP_PREFIX
 
 from .runs import Baseline, finish, outcome, tiny, train
 
@@ -78,13 +79,16 @@ def test_a_branched_run_stopped_and_resumed_ends_as_the_variant_run_from_its_fir
     path = variant(straight.curriculum, tmp_path, THIRD, LONGER_THIRD)
     finish(train([str(path), "--out", "scratch"], tmp_path))
 
+    leftover = tmp_path / "branched" / f"{TMP_PREFIX}stage-1-first"  # what a branch killed while copying leaves
+    leftover.mkdir(parents=True)
+    (leftover / "test.json").write_text("{")
     run = branch(load_curriculum(path), straight.out, tmp_path / "branched")
     assert run.state.stage == 2 and run.trainer.progress.env_steps == 160
     run.run(should_stop=lambda: run.trainer.progress.env_steps >= 190)
     run.close()
     finish(train([str(path), "--out", "branched", "--resume"], tmp_path))
 
-    assert outcome(tmp_path / "branched") == outcome(tmp_path / "scratch")
+    assert outcome(tmp_path / "branched") == outcome(tmp_path / "scratch") and not leftover.exists()
     assert load_curriculum(tmp_path / "branched" / CONFIG) == load_curriculum(path)
 
 
