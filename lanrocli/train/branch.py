@@ -77,6 +77,13 @@ def branch(
     except CheckpointError as error:
         raise RunError(f"--from {source}: its stage {index} has no checkpoint to start from ({error})") from None
     state = RunState.from_dict(extra["run"])
+    if state.finished:
+        trainer.close()
+        raise RunError(
+            f"--from {source}: that run ended with its stage {index} ({planned.stages[index - 1].name}), so it never "
+            "began the stage the new run would begin with. A variant may change stages the run entered, not add "
+            "stages after its end; start a new run without --from."
+        )
     if state.stage != index:
         trainer.close()
         raise RunError(

@@ -91,6 +91,11 @@ def test_a_branched_run_stopped_and_resumed_ends_as_the_variant_run_from_its_fir
     assert outcome(tmp_path / "branched") == outcome(tmp_path / "scratch") and not leftover.exists()
     assert load_curriculum(tmp_path / "branched" / CONFIG) == load_curriculum(path)
 
+    fourth = "  - name: fourth\n    env: {objects: 2}\n    budget: {steps: 40}\nholdout:"
+    (tmp_path / "fourth.yaml").write_text(straight.curriculum.read_text().replace("holdout:", fourth))
+    with pytest.raises(RunError, match="ended with its stage 3"):  # the run never began a fourth stage
+        branch(load_curriculum(tmp_path / "fourth.yaml"), straight.out, tmp_path / "fourth")
+
 
 def test_the_cli_refuses_from_with_resume(tmp_path: Path) -> None:
     process = train([str(tiny(tmp_path)), "--from", "elsewhere", "--resume"], tmp_path)
