@@ -13,15 +13,14 @@ from __future__ import annotations
 
 import shutil
 from pathlib import Path
-from typing import Any
 
 import torch
 
 from lanrocli.train.curriculum import Curriculum, CurriculumError, diff_curricula, load_curriculum
 from lanrocli.train.errors import CheckpointError, RunError
 from lanrocli.train.pipeline import CurriculumRun, RunObserver, claim_folder
-from lanrocli.train.recovery import clear_leftovers, released_on_error
-from lanrocli.train.runfolder import CONFIG, LAST, METRICS, read_pointer, stage_folder, truncate_metrics
+from lanrocli.train.recovery import clear_leftovers, released_on_error, restore_metrics
+from lanrocli.train.runfolder import CONFIG, LAST, METRICS, read_pointer, stage_folder
 from lanrocli.train.runstate import RunState
 from lanrocli.train.sections import Stage
 from lanrocli.train.trainer import Trainer
@@ -73,29 +72,31 @@ def branch(
     index = branch_point(planned, variant)
     ended = source / stage_folder(index - 1, planned.stages[index - 1].name)
     try:
-        trainer, extra = Trainer.load(read_pointer(ended / LAST), device)
+        checkpoint = read_pointer(ended / LAST)
+        trainer, extra = Trainer.load(checkpoint, device)
     except CheckpointError as error:
         raise RunError(f"--from {source}: its stage {index} has no checkpoint to start from ({error})") from None
     state = RunState.from_dict(extra["run"])
-    if state.finished:
-        trainer.close()
-        raise RunError(
-            f"--from {source}: that run ended with its stage {index} ({planned.stages[index - 1].name}), so it never "
-            "began the stage the new run would begin with. A variant may change stages the run entered, not add "
-            "stages after its end; start a new run without --from."
-        )
-    if state.stage != index:
-        trainer.close()
-        raise RunError(
-            f"--from {source}: its stage {index} ({planned.stages[index - 1].name}) has not ended yet, and the new "
-            f"run would begin where it ends. Resume that run first (lanro train --resume --out {source})."
-        )
     try:
+        if state.finished:
+            raise RunError(
+                f"--from {source}: that run ended with its stage {index} ({planned.stages[index - 1].name}), so it "
+                "never began the stage the new run would begin with. A variant may change stages the run entered, "
+                "not add stages after its end; start a new run without --from."
+            )
+        if state.stage != index:
+            raise RunError(
+                f"--from {source}: its stage {index} ({planned.stages[index - 1].name}) has not ended yet, and the "
+                f"new run would begin where it ends. Resume that run first (lanro train --resume --out {source})."
+            )
         lock, notes = claim_folder(out)
         with released_on_error(lock):
             clear_leftovers(out)
             write_text(out / CONFIG, variant.to_yaml())
-            copies = _copy_stages(planned.stages[:index], source, out, extra, state.stage_start)
+            if (source / METRICS).is_file():
+                shutil.copy2(source / METRICS, out / METRICS)
+            restore_metrics(out, checkpoint, extra, notes)
+            copies = _copy_stages(planned.stages[:index], source, out)
             run = CurriculumRun(variant, out, trainer, state, observer, lock, notes)
             # The run's own checkpoint first, with its own curriculum: a kill before the copies are in place
             # then resumes this run (testing the copied stages again), never the source's plan.
@@ -109,14 +110,9 @@ def branch(
     return run
 
 
-def _copy_stages(stages: list[Stage], source: Path, out: Path, extra: dict[str, Any], steps: int) -> list[str]:
-    """The source's metrics up to ``steps``, its TensorBoard events (which drop what follows, as a resumed
-    run's do) and the folders of ``stages``, under temporary names; returns their names."""
-    if METRICS in extra.get("files", {}):
-        write_text(out / METRICS, extra["files"][METRICS])
-    elif (source / METRICS).is_file():  # a checkpoint of an older version carries no copy
-        shutil.copy2(source / METRICS, out / METRICS)
-        truncate_metrics(out / METRICS, steps)
+def _copy_stages(stages: list[Stage], source: Path, out: Path) -> list[str]:
+    """The source's TensorBoard events (which drop what follows the branch, as a resumed run's do) and the
+    folders of ``stages``, under temporary names; returns their names."""
     for events in source.glob("events.*"):
         shutil.copy2(events, out / events.name)
     names = [stage_folder(i, stage.name) for i, stage in enumerate(stages)]

@@ -184,6 +184,17 @@ def restore_files(out: Path, directory: Path, extra: dict[str, Any], notes: list
         if current != copies[CONFIG]:
             notes.append(f"{config} was {'changed' if current is not None else 'missing'}: restored from the checkpoint")
             write_text(config, copies[CONFIG])
+    restore_metrics(out, directory, extra, notes)
+    try:
+        return load_curriculum(out / CONFIG)
+    except (CurriculumError, OSError) as error:
+        raise RunError(f"{out} holds no readable {CONFIG} and its checkpoint no copy of it: {error}") from None
+
+
+def restore_metrics(out: Path, directory: Path, extra: dict[str, Any], notes: list[str]) -> None:
+    """Rewrite ``out``'s ``metrics.csv`` as the checkpoint at ``directory`` saw it (from its copy, or, for
+    an older checkpoint without one, the file cut back to the checkpoint's steps), in this version's columns."""
+    copies = extra.get("files", {})
     if METRICS in copies:
         write_text(out / METRICS, copies[METRICS])
     else:
@@ -194,7 +205,3 @@ def restore_files(out: Path, directory: Path, extra: dict[str, Any], notes: list
             f"{out / METRICS} was written by an older version: rewritten with {len(gained)} new column(s) "
             f"({', '.join(gained)}), empty in its earlier rows"
         )
-    try:
-        return load_curriculum(out / CONFIG)
-    except (CurriculumError, OSError) as error:
-        raise RunError(f"{out} holds no readable {CONFIG} and its checkpoint no copy of it: {error}") from None
