@@ -11,7 +11,10 @@ and sorts every episode in which the instructor spoke into:
   after the correction is reported (median), to tell "went elsewhere" from "stopped near".
 
 It also says which object was knocked first (moved more than 2.5 cm), and whether before or after the
-correction: in reach, leaving a touched wrong object by dragging it is the typical first slip.
+correction: in reach, leaving a touched wrong object by dragging it is the typical first slip. In grasp and
+lift, where what an object has achieved is its being held (or raised), it also says how many failures held
+another object when the correction was spoken (and how many of those still succeeded), and how many failures
+still held one at the end: a hand that never lets go of the wrong object cannot take the goal.
 
     python benchmarks/after_correction.py runs/learning-corrections --episodes 100
 
@@ -31,6 +34,7 @@ import torch
 
 from lanrocli.envs.env import LanroEnv
 from lanrocli.tasks.reach import REACH_STILL
+from lanrocli.tasks.registry import task_class
 from lanrocli.train.agent_policy import AgentPolicy
 from lanrocli.train.pretrained import agent_path
 from lanrocli.train.trainer import load_policy
@@ -43,6 +47,8 @@ class Outcome:
     result: str  # succeeded, knocked the goal, the goal fell, fell short
     closest: float  # closest approach of the end effector to the goal after the correction, m
     first_knock: str | None  # e.g. "another object, after the correction"; None if nothing moved 2.5 cm
+    held_other_at_correction: bool  # another object achieved (held, raised) on the step the correction came
+    held_other_at_end: bool  # another object achieved on the last step
 
 
 def run(env: LanroEnv, policy: AgentPolicy, seed: int) -> Outcome | None:
@@ -51,10 +57,13 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int) -> Outcome | None:
     goal = info["goal_index"]
     closest = np.inf
     first_knock = None
-    done = False
+    held_at_correction = spoken = done = False
     while not done:
         obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
         done = terminated or truncated
+        others_achieved = bool(np.delete(info["achieved"], goal).any())
+        if not spoken and info["correction"] is not None:
+            held_at_correction = others_achieved
         spoken = info["correction"] is not None
         positions = info["object_positions"]
         if spoken:
@@ -73,7 +82,7 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int) -> Outcome | None:
         result = "knocked the goal"
     else:
         result = "fell short"
-    return Outcome(result, closest, first_knock)
+    return Outcome(result, closest, first_knock, held_at_correction, others_achieved)
 
 
 def main() -> None:
@@ -92,6 +101,7 @@ def main() -> None:
     outcomes = [run(env, policy, args.seed + i) for i in range(args.episodes)]
     env.close()
     spoken = [o for o in outcomes if o is not None]
+    lost = [str(args.seed + i) for i, o in enumerate(outcomes) if o is not None and o.result != "succeeded"]
     print(f"{args.checkpoint}: {settings.task}, kinds {', '.join(args.kinds)}, seeds {args.seed}..")
     print(f"{args.episodes} episodes, a correction was spoken in {len(spoken)}")
     results = Counter(o.result for o in spoken)
@@ -103,6 +113,14 @@ def main() -> None:
     print("first object knocked, in the failures:")
     for knock, count in knocks.most_common():
         print(f"  {knock:<36} {count:>4}")
+    if task_class(settings.task).gripper:
+        holding = [o for o in spoken if o.held_other_at_correction]
+        won = sum(o.result == "succeeded" for o in holding)
+        still = sum(o.held_other_at_end for o in spoken if o.result != "succeeded")
+        print(f"another object held (or raised) when the correction was spoken: {len(holding)}, {won} succeeded")
+        print(f"  failures still holding another object on the last step: {still}")
+    print("seeds of the failures, to watch one (lanro eval CHECKPOINT --correction-rate 1 --kinds ambiguity,...")
+    print(f"  --episodes 1 --seed S --gif F): {' '.join(lost)}")
 
 
 if __name__ == "__main__":
