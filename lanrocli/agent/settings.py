@@ -68,12 +68,13 @@ class SACSettings:
     others weighed by how little attention they get. After a correction the arm is often still at the
     object it wrongly acted on; without this it cannot see that object once the attention leaves it."""
     acting_attention: str = ActingAttention.SOFT.value
-    """How a deterministic action (evaluation, tests, ``lanro play``) reads the scene with ``architecture:
-    objects``: ``soft``, the attention-weighted mix of the objects that training reads; ``argmax``, the one
-    object the attention weighs most. A split attention (an ambiguous instruction, what a negation leaves on
-    the object it names) mixes objects into a place where none is, and the arm heads there; committing to one
-    object acts on it, and if it is the wrong one, a correction follows. Training's exploring actions, and
-    the attention the tests report, stay soft, so this may change between stages and in ``lanro eval``."""
+    """How a deterministic action (evaluations, and so promotion; tests; ``lanro play``) reads the scene with
+    ``architecture: objects``: ``soft``, the attention-weighted mix of the objects that training reads;
+    ``argmax``, the one object the attention weighs most. A split attention (an ambiguous instruction, what a
+    negation leaves on the object it names) mixes objects into a place where none is, and the arm heads
+    there; committing to one object acts on it, and if it is the wrong one, a correction follows. Training's
+    exploring actions and updates, and the attention the tests report, stay soft, so an agent trained either
+    way can be measured the other (``lanro eval --acting-attention``)."""
     share_encoder: bool = False
     """One sentence encoder for actor and critic, trained by the critic's loss only."""
     max_grad_norm: float | None = None
