@@ -78,6 +78,16 @@ class Split(StrEnum):
     """The instruction's rare colour word was never heard in training."""
 
 
+class ActingAttention(StrEnum):
+    """How an agent with object attention reads the scene when it acts deterministically
+    (``SACSettings.acting_attention`` says why one would choose either)."""
+
+    SOFT = "soft"
+    """The attention-weighted mix of the objects, as in training."""
+    ARGMAX = "argmax"
+    """The one object the attention weighs most."""
+
+
 class Instruction(StrEnum):
     """Which sentence the agent reads during an episode: the check that it follows language at all.
 

@@ -358,6 +358,28 @@ def test_train_on_a_device_this_machine_cannot_serve_is_a_clear_error(tmp_path: 
     assert not out.exists(), "the device is checked before the run folder is made"
 
 
+def test_eval_acting_attention_is_recorded_and_refused_where_nothing_attends(
+    untrained_checkpoint: Path, tmp_path: Path
+) -> None:
+    from lanrocli.agent.settings import BufferSettings, SACSettings
+    from lanrocli.train.trainer import Trainer, TrainSettings
+
+    settings = SACSettings(hidden_size=16, obs_size=16, architecture="objects")
+    attending = Trainer(TrainSettings(task="reach", buffer=BufferSettings(size=10)), settings).save(
+        tmp_path / "checkpoint", resumable=False
+    )
+    records = {}
+    for rule in ("soft", "argmax"):
+        result = runner.invoke(app, ["eval", str(attending), "--episodes", "2", "--acting-attention", rule, "--json"])
+        assert result.exit_code == 0, result.output
+        records[rule] = json.loads(result.output)
+    assert records["soft"]["acting_attention"] == "soft" and records["argmax"]["acting_attention"] == "argmax"
+    flat = runner.invoke(app, ["eval", str(untrained_checkpoint), "--episodes", "1", "--acting-attention", "argmax"])
+    assert flat.exit_code == 2 and "needs architecture 'objects'" in flat.output, flat.output
+    scripted = runner.invoke(app, ["eval", "oracle", "--acting-attention", "argmax"])
+    assert scripted.exit_code == 2 and "scripted policies" in scripted.output, scripted.output
+
+
 def test_eval_table_has_every_form_and_marks_what_is_not_judged() -> None:
     result = runner.invoke(
         app, ["eval", "mistaken", "--episodes", "3", "--correction-rate", "1", "--negations", "--kinds", "wrong_object"]

@@ -20,12 +20,19 @@ from lanrocli.agent.networks import Actor, Critic, ObjectLayout, attention_loss
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
 from lanrocli.agent.transitions import Batch
+from lanrocli.choices import ActingAttention
 from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 
 _FORMAT = 1
 
 POLICY_ONLY_DROPS = ("optimizer", "target_critic", "generator", "generator_device")
 """What :meth:`SACAgent.policy_state_dict` leaves out of the agent's state."""
+
+
+def _argmax_scores(scores: torch.Tensor) -> torch.Tensor:
+    """Attention logits whose softmax is one on each row's highest score and zero elsewhere."""
+    lowest = torch.full_like(scores, torch.finfo(scores.dtype).min)
+    return lowest.scatter(-1, scores.argmax(dim=-1, keepdim=True), 0.0)
 
 
 class SACAgent:
@@ -138,8 +145,14 @@ class SACAgent:
         if self.actor.reader is None:
             return self.actor.mode(x, language, present).cpu().numpy(), None
         scores = self.actor.reader.scores(x, language, present)
-        mean, _ = self.actor(x, language, present, scores)
+        acting = scores if self.settings.acting_attention == ActingAttention.SOFT else _argmax_scores(scores)
+        mean, _ = self.actor(x, language, present, acting)
         return torch.tanh(mean).cpu().numpy(), scores[0].softmax(dim=-1).cpu().numpy()
+
+    def act_by(self, attention: ActingAttention) -> None:
+        """Read the scene by ``attention`` in deterministic actions from now on (``SACSettings.acting_attention``);
+        no weight changes, so an agent trained with one rule can be measured with the other."""
+        self.settings = dataclasses.replace(self.settings, acting_attention=ActingAttention(attention).value)
 
     def update_normalizer(self, observations: np.ndarray) -> None:
         """Add collected observations [n, N] to the normaliser's statistics (not relabelled samples)."""

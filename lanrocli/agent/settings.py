@@ -8,6 +8,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
 
+from lanrocli.choices import ActingAttention
+
 UPDATE_METRICS = ("critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy")
 """The figures each update of the agent reports, in its order; ``metrics.csv`` has a column for each."""
 
@@ -65,6 +67,14 @@ class SACSettings:
     """With ``architecture: objects``, the layers after the attention see, beside the named object, the
     others weighed by how little attention they get. After a correction the arm is often still at the
     object it wrongly acted on; without this it cannot see that object once the attention leaves it."""
+    acting_attention: str = ActingAttention.SOFT.value
+    """How a deterministic action (evaluations, and so promotion; tests; ``lanro play``) reads the scene with
+    ``architecture: objects``: ``soft``, the attention-weighted mix of the objects that training reads;
+    ``argmax``, the one object the attention weighs most. A split attention (an ambiguous instruction, what a
+    negation leaves on the object it names) mixes objects into a place where none is, and the arm heads
+    there; committing to one object acts on it, and if it is the wrong one, a correction follows. Training's
+    exploring actions and updates, and the attention the tests report, stay soft, so an agent trained either
+    way can be measured the other (``lanro eval --acting-attention``)."""
     share_encoder: bool = False
     """One sentence encoder for actor and critic, trained by the critic's loss only."""
     max_grad_norm: float | None = None
@@ -94,6 +104,11 @@ class SACSettings:
             raise ValueError("gamma and polyak must lie in [0, 1]")
         if not self.sentence_in_trunk and self.architecture != "objects":
             raise ValueError("sentence_in_trunk: false needs architecture 'objects': a flat network reads the sentence only there")
+        if self.acting_attention not in tuple(ActingAttention):
+            choices = " or ".join(repr(a.value) for a in ActingAttention)
+            raise ValueError(f"acting_attention must be {choices}, got {self.acting_attention!r}")
+        if self.acting_attention != ActingAttention.SOFT and self.architecture != "objects":
+            raise ValueError("acting_attention: argmax needs architecture 'objects': a flat network has no attention")
         if self.see_rest and self.architecture != "objects":
             raise ValueError("see_rest: true needs architecture 'objects': a flat network sees every object already")
         if self.grounding < 0.0:

@@ -16,7 +16,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from lanrocli.arguments import device_option, env_changes, err_console, fail, with_env_options
-from lanrocli.choices import Instruction, Split, Task
+from lanrocli.choices import ActingAttention, Instruction, Split, Task
 from lanrocli.command_display import env_summary, print_evaluation
 from lanrocli.envs.settings import EnvSettings
 
@@ -84,6 +84,13 @@ def evaluate_command(
             "split's own held-out episodes, as its run measured it; --episodes sets how many (default: test.episodes).",
         ),
     ] = None,
+    acting_attention: Annotated[
+        ActingAttention | None,
+        typer.Option(
+            help="How a trained agent with object attention reads the scene as it acts: the attention-weighted mix "
+            "of the objects (soft) or the one object it attends to most (argmax). Default: the agent's own rule.",
+        ),
+    ] = None,
     **env_options: Any,
 ) -> None:
     """Evaluate a scripted policy or a trained agent, overall and per kind and form of correction.
@@ -111,6 +118,8 @@ def evaluate_command(
             )
         if instruction is not Instruction.TRUE:
             raise fail("--instruction changes what a trained agent reads; scripted policies read no sentence")
+        if acting_attention is not None:
+            raise fail("--acting-attention changes how a trained agent reads the scene; scripted policies attend to nothing")
         task_name = task or Task.REACH
         first = 0 if seed is None else seed
         try:
@@ -126,14 +135,14 @@ def evaluate_command(
         where = f"seed {first}"
     elif split is not None:
         agent = _trained_agent(what)
-        measurement = _measure_checkpoint(agent, task, device, _split_test(agent, split, episodes))
+        measurement = _measure_checkpoint(agent, task, device, _split_test(agent, split, episodes, acting_attention))
         report, record, task_name, env_settings = (
             measurement.report, measurement.record, measurement.settings.task, measurement.env
         )
         where = f"the {split.value} split's held-out episodes"
     elif correction_test:
         agent = _trained_agent(what)
-        measurement = _measure_checkpoint(agent, task, device, _correction_test(agent, changes, episodes))
+        measurement = _measure_checkpoint(agent, task, device, _correction_test(agent, changes, episodes, acting_attention))
         report, record, task_name, env_settings = (
             measurement.report, measurement.record, measurement.settings.task, measurement.env
         )
@@ -142,8 +151,9 @@ def evaluate_command(
         met = "reached" if record["quota_met"] else f"not reached in {quota['episodes']} episodes"
         where = f"correction test ({quota['spoken']} spoken corrections{negations}: {met})"
     else:
+        agent = _trained_agent(what)
         measurement = _measure_checkpoint(
-            _trained_agent(what), task, device, _test(_trained_agent(what), changes, episodes, seed, instruction, gif)
+            agent, task, device, _test(agent, changes, episodes, seed, instruction, gif, acting_attention)
         )
         report, record, task_name, env_settings = (
             measurement.report, measurement.record, measurement.settings.task, measurement.env
@@ -151,6 +161,8 @@ def evaluate_command(
         where = "held-out test episodes" if measurement.held_out else f"seed {measurement.first_seed}"
         if instruction is not Instruction.TRUE:
             where += f", instruction {instruction}"
+    if record.get("acting_attention") == ActingAttention.ARGMAX:
+        where += ", acting on the object it attends to most"
     if record.get("unknown_words"):
         unknown = ", ".join(record["unknown_words"])
         err_console.print(f"[bold yellow]warning:[/] {escape(f'the agent never learned the words {unknown}: it reads each as <unk>')}")
@@ -168,18 +180,27 @@ Measure = Callable[[Any, Check], "Measurement"]
 
 
 def _test(
-    path: Path, overrides: dict[str, Any], episodes: int | None, seed: int | None, shown: Instruction, gif: Path | None
+    path: Path,
+    overrides: dict[str, Any],
+    episodes: int | None,
+    seed: int | None,
+    shown: Instruction,
+    gif: Path | None,
+    acting: ActingAttention | None,
 ) -> Measure:
     """The checkpoint at ``path`` on its test episodes, or on others as the options ask."""
     from lanrocli.train.testset import measure
 
     def run(device: Any, check: Check) -> Measurement:
-        return measure(path, episodes or _test_episodes(path), device, overrides, seed, shown, gif, check=check)
+        count = episodes or _test_episodes(path)
+        return measure(path, count, device, overrides, seed, shown, gif, check=check, acting_attention=acting)
 
     return run
 
 
-def _correction_test(path: Path, overrides: dict[str, Any], episodes: int | None) -> Measure:
+def _correction_test(
+    path: Path, overrides: dict[str, Any], episodes: int | None, acting: ActingAttention | None
+) -> Measure:
     """The checkpoint at ``path`` on the correction test its run made: the quota sized like its test, at most
     ``episodes`` episodes where given."""
     from lanrocli.train.testset import CORRECTION_QUOTA, correction_test
@@ -188,17 +209,18 @@ def _correction_test(path: Path, overrides: dict[str, Any], episodes: int | None
         quota = CORRECTION_QUOTA.scaled(_test_episodes(path))
         if episodes is not None:
             quota = dataclasses.replace(quota, episodes=episodes)
-        return correction_test(path, quota, device, overrides, check=check)
+        return correction_test(path, quota, device, overrides, check=check, acting_attention=acting)
 
     return run
 
 
-def _split_test(path: Path, split: Split, episodes: int | None) -> Measure:
+def _split_test(path: Path, split: Split, episodes: int | None, acting: ActingAttention | None) -> Measure:
     """The checkpoint at ``path`` on one generalisation split of its run's holdout."""
     from lanrocli.train.testset import split_test
 
     def run(device: Any, check: Check) -> Measurement:
-        return split_test(path, split, episodes or _test_episodes(path), device, check=check)
+        count = episodes or _test_episodes(path)
+        return split_test(path, split, count, device, check=check, acting_attention=acting)
 
     return run
 

@@ -100,12 +100,16 @@ def _load(
     changes: Callable[[EnvSettings], Mapping[str, Any]],
     check: Callable[[TrainSettings, EnvSettings], None] | None,
     split: Split | None = None,
+    acting_attention: ActingAttention | None = None,
 ) -> _Loaded:
     """Load the checkpoint at ``path``; its stage's settings as evaluation sees them (neutral starts) are
     changed by what ``changes`` makes of them, and ``check`` may refuse the result before anything runs;
-    ``split``, which the checkpoint's holdout must define, makes the episodes that split's."""
+    ``split``, which the checkpoint's holdout must define, makes the episodes that split's;
+    ``acting_attention`` replaces the agent's rule for reading the scene as it acts."""
     directory = resolve_checkpoint(path)
     settings, policy = load_policy(directory, device)
+    if acting_attention is not None:
+        policy.agent.act_by(acting_attention)
     settings.holdout.check_split(split)
     stage = settings.env.for_evaluation()
     env_settings = stage.replace(**changes(stage))
@@ -151,6 +155,7 @@ def _record(
         "env": loaded.env.to_dict(),
         "episodes_from": episodes_from,
         "instruction": instruction.value,
+        "acting_attention": loaded.policy.agent.settings.acting_attention,
         "unknown_words": unlearned_words(loaded.policy.vocabulary),
         **report.as_dict(),
     }
@@ -166,15 +171,16 @@ def measure(
     gif: Path | None = None,
     progress: Callable[[int], None] | None = None,
     check: Callable[[TrainSettings, EnvSettings], None] | None = None,
+    acting_attention: ActingAttention | None = None,
 ) -> Measurement:
     """Run the deterministic policy of the checkpoint at ``path`` (a checkpoint, pointer or run folder).
 
     The environment is the checkpoint's stage as evaluation sees it (neutral starts), changed by
     ``overrides`` (fields of ``EnvSettings``); the episodes are the stage's test episodes unless ``seed`` asks
     for others (episode i then uses ``seed + i``). ``check`` may refuse the resolved settings (raise) before
-    anything runs.
+    anything runs; ``acting_attention`` replaces the agent's rule for reading the scene as it acts.
     """
-    loaded = _load(path, device, lambda _: overrides or {}, check)
+    loaded = _load(path, device, lambda _: overrides or {}, check, acting_attention=acting_attention)
     held_out = seed is None
     first = held_out_seed(loaded.settings.seed, loaded.settings.stage) if seed is None else seed
     report = _run(loaded, episodes, first, instruction, gif, progress)
@@ -200,6 +206,7 @@ def correction_test(
     overrides: Mapping[str, Any] | None = None,
     progress: Callable[[int], None] | None = None,
     check: Callable[[TrainSettings, EnvSettings], None] | None = None,
+    acting_attention: ActingAttention | None = None,
 ) -> Measurement:
     """The checkpoint at ``path`` on its stage's correction-test episodes until ``quota`` is met.
 
@@ -207,7 +214,7 @@ def correction_test(
     training, evaluation or the ordinary test; they and the quota fix where it stops, so the same checkpoint
     always gives the same record. The record is ``measure``'s with ``quota`` and whether it was met.
     """
-    loaded = _load(path, device, _correction_settings(overrides or {}), check)
+    loaded = _load(path, device, _correction_settings(overrides or {}), check, acting_attention=acting_attention)
     first = correction_test_seed(loaded.settings.seed, loaded.settings.stage)
     negations = loaded.env.negations
     report = _run(loaded, quota.episodes, first, progress=progress, enough=lambda r: quota.met(r, negations))
@@ -241,10 +248,11 @@ def split_test(
     device: str | torch.device = "cpu",
     progress: Callable[[int], None] | None = None,
     check: Callable[[TrainSettings, EnvSettings], None] | None = None,
+    acting_attention: ActingAttention | None = None,
 ) -> Measurement:
     """The checkpoint at ``path`` on ``episodes`` held-out episodes of one generalisation split of its run's
     holdout, on a seed stream of the split's own."""
-    loaded = _load(path, device, split_changes(split), check, split)
+    loaded = _load(path, device, split_changes(split), check, split, acting_attention)
     first = split_test_seed(loaded.settings.seed, loaded.settings.stage, split)
     report = _run(loaded, episodes, first, progress=progress)
     record = {**_record(loaded, {"split": split.value, "first_seed": first}, Instruction.TRUE, report), "split": split.value}

@@ -16,6 +16,7 @@ from lanrocli.agent.transitions import Batch
 from lanrocli.agent.networks import ObjectLayout
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings, SACSettings
+from lanrocli.choices import ActingAttention
 
 from .episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
 
@@ -113,6 +114,34 @@ def test_act_and_attend_answers_a_batch_as_it_answers_each_row_alone(architectur
         assert weights is not None
         np.testing.assert_allclose(weights, np.concatenate([w for _, w in rows]), atol=1e-6)
         np.testing.assert_allclose(weights.sum(axis=1), 1.0, atol=1e-6)
+
+
+def test_argmax_acting_acts_on_the_most_attended_object_alone_and_reports_the_soft_attention() -> None:
+    agent = _agent(architecture="objects")
+    rng = np.random.default_rng(3)
+    agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
+    agent.update(_batch(rng))
+    obs = {"observation": rng.normal(size=(6, OBS_DIM)).astype(np.float32), "instruction": np.stack([RED, BLUE] * 3)}
+    soft_actions, weights = agent.act_and_attend(obs)
+    assert weights is not None and ((weights > 0.05) & (weights < 0.95)).all(), "a split attention, to be decided"
+    agent.act_by(ActingAttention.ARGMAX)
+    actions, argmax_weights = agent.act_and_attend(obs)
+    np.testing.assert_array_equal(argmax_weights, weights)
+    assert np.abs(actions - soft_actions).max() > 1e-3
+    # The same agent acting softly in the scene without the other object: the attention has one object to weigh.
+    alone = obs["observation"].copy().reshape(6, -1)
+    objects = alone[:, LAYOUT.arm :].reshape(6, LAYOUT.slots, LAYOUT.object)
+    objects[np.arange(6), 1 - weights.argmax(axis=1)] = 0.0
+    agent.act_by(ActingAttention.SOFT)
+    expected, _ = agent.act_and_attend({"observation": alone, "instruction": obs["instruction"]})
+    np.testing.assert_allclose(actions, expected, atol=1e-6)
+
+
+def test_argmax_acting_needs_object_attention_and_a_known_rule() -> None:
+    with pytest.raises(ValueError, match="needs architecture 'objects'"):
+        SACSettings(acting_attention="argmax")
+    with pytest.raises(ValueError, match="'soft' or 'argmax'"):
+        SACSettings(architecture="objects", acting_attention="hard")
 
 
 def test_grounding_loss_teaches_every_reader_which_object_a_sentence_names() -> None:
