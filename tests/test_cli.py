@@ -402,3 +402,8 @@ def test_eval_correction_test_of_a_checkpoint_and_its_refusals(untrained_checkpo
     assert refused.exit_code == 2 and "scripted policy" in refused.output
     refused = runner.invoke(app, ["eval", str(untrained_checkpoint), "--correction-test", "--seed", "4"])
     assert refused.exit_code == 2 and "--seed" in refused.output
+    refused = runner.invoke(app, ["eval", str(untrained_checkpoint), "--second-corrections", "30"])
+    assert refused.exit_code == 2 and "add --correction-test" in refused.output
+    # Its stage corrects at most once an episode: a second correction is never spoken there.
+    refused = runner.invoke(app, ["eval", str(untrained_checkpoint), "--correction-test", "--second-corrections", "3"])
+    assert refused.exit_code == 2 and "never spoken" in refused.output, refused.output

@@ -77,6 +77,14 @@ def evaluate_command(
             "--episodes caps the episodes.",
         ),
     ] = False,
+    second_corrections: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            help="With --correction-test: go on until this many episodes had a second correction spoken too (a "
+            "stage with chains of corrections), to judge the agent after one. --episodes caps the episodes.",
+        ),
+    ] = None,
     split: Annotated[
         Split | None,
         typer.Option(
@@ -106,6 +114,8 @@ def evaluate_command(
     if correction_test and (seed is not None or instruction is not Instruction.TRUE or gif is not None):
         raise fail("--correction-test runs episodes of its own, as the sentence the instructor speaks; leave out "
                    "--seed, --instruction and --gif")
+    if second_corrections is not None and not correction_test:
+        raise fail("--second-corrections sets how long the correction test runs; add --correction-test")
     if split is not None and (correction_test or seed is not None or instruction is not Instruction.TRUE or gif or changes):
         raise fail("--split runs the split's own episodes and settings; leave out --correction-test, --seed, "
                    "--instruction, --gif and the environment options")
@@ -142,12 +152,15 @@ def evaluate_command(
         where = f"the {split.value} split's held-out episodes"
     elif correction_test:
         agent = _trained_agent(what)
-        measurement = _measure_checkpoint(agent, task, device, _correction_test(agent, changes, episodes, acting_attention))
+        measurement = _measure_checkpoint(
+            agent, task, device, _correction_test(agent, changes, episodes, second_corrections, acting_attention)
+        )
         report, record, task_name, env_settings = (
             measurement.report, measurement.record, measurement.settings.task, measurement.env
         )
         quota = record["quota"]
         negations = f" and {quota['negations']} negations" if quota["negations"] else ""
+        negations += f" and {quota['second']} second corrections" if quota.get("second") else ""
         met = "reached" if record["quota_met"] else f"not reached in {quota['episodes']} episodes"
         where = f"correction test ({quota['spoken']} spoken corrections{negations}: {met})"
     else:
@@ -199,16 +212,19 @@ def _test(
 
 
 def _correction_test(
-    path: Path, overrides: dict[str, Any], episodes: int | None, acting: ActingAttention | None
+    path: Path, overrides: dict[str, Any], episodes: int | None, second: int | None, acting: ActingAttention | None
 ) -> Measure:
     """The checkpoint at ``path`` on the correction test its run made: the quota sized like its test, at most
-    ``episodes`` episodes where given."""
-    from lanrocli.train.testset import CORRECTION_QUOTA, correction_test
+    ``episodes`` episodes where given, and on until ``second`` second corrections were spoken where given."""
+    from lanrocli.train.quota import CORRECTION_QUOTA
+    from lanrocli.train.testset import correction_test
 
     def run(device: Any, check: Check) -> Measurement:
         quota = CORRECTION_QUOTA.scaled(_test_episodes(path))
         if episodes is not None:
             quota = dataclasses.replace(quota, episodes=episodes)
+        if second is not None:
+            quota = dataclasses.replace(quota, second=second)
         return correction_test(path, quota, device, overrides, check=check, acting_attention=acting)
 
     return run

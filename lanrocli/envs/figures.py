@@ -154,10 +154,15 @@ ORDINALS = {2: "second"}
 """The words for the corrections after the first, up to ``MAX_CORRECTIONS``."""
 
 
+def after_correction(index: int) -> str:
+    """The name of the figure on episodes in which at least ``index`` corrections were spoken."""
+    return f"corrected_success_after_{index}"
+
+
 def _index_figure(index: int) -> Figure:
     """Episodes in which at least ``index`` corrections were spoken: how the agent does once corrected again."""
     return Figure(
-        f"corrected_success_after_{index}",
+        after_correction(index),
         f"corrected_episodes_after_{index}",
         f"after a {ORDINALS[index]} correction",
         lambda r: r.corrections >= index,

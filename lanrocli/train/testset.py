@@ -7,13 +7,12 @@ record is what ``test.json`` holds and what ``lanro eval --json`` prints.
 The ordinary test holds few spoken corrections (about one episode in five, fewer of each kind and form), too
 few to judge how an agent follows each. The correction test makes every episode a correction episode, half
 of the spoken corrections negations where the stage has them, and runs held-out episodes of its own until
-enough corrections and negations were spoken (``CorrectionQuota``).
+enough corrections and negations were spoken (:class:`~lanrocli.train.quota.CorrectionQuota`).
 """
 
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -21,13 +20,14 @@ from typing import Any
 
 import torch
 
-from lanrocli.choices import CorrectionForm, Instruction, Kind, Split
+from lanrocli.choices import ActingAttention, Instruction, Kind, Split
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.evaluation import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.workers import make_envs
 from lanrocli.language.vocabulary import unlearned_words
 from lanrocli.train.checkpoint import resolve_checkpoint
+from lanrocli.train.quota import CORRECTION_QUOTA, CorrectionQuota
 from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, SPLITS
 from lanrocli.train.seeds import correction_test_seed, held_out_seed, split_test_seed
 from lanrocli.train.agent_policy import AgentPolicy
@@ -37,33 +37,6 @@ CORRECTION_TEST_NEGATION_RATE = 0.5
 """Share of the correction test's spoken corrections that are negations, where the stage allows them."""
 
 
-@dataclass(frozen=True)
-class CorrectionQuota:
-    """When the correction test stops: once ``spoken`` episodes had a spoken correction and, where
-    negations are on, ``negations`` of them a negation; or after ``episodes`` episodes whatever was heard,
-    so that an agent that never errs, and so is never corrected, still ends."""
-
-    spoken: int
-    negations: int
-    episodes: int
-
-    def met(self, report: EvaluationReport, negations: bool) -> bool:
-        heard = report.by_form()[CorrectionForm.NEGATION].episodes
-        return report.corrected.episodes >= self.spoken and (not negations or heard >= self.negations)
-
-    def scaled(self, test_episodes: int) -> CorrectionQuota:
-        """This quota for a run whose ordinary test has ``test_episodes`` episodes instead of
-        ``QUOTA_TEST_EPISODES``: a run that tests on few episodes (a quick run, a test's) spends as little here."""
-        factor = test_episodes / QUOTA_TEST_EPISODES
-        return CorrectionQuota(*(max(1, math.ceil(n * factor)) for n in (self.spoken, self.negations, self.episodes)))
-
-
-CORRECTION_QUOTA = CorrectionQuota(spoken=300, negations=150, episodes=3000)
-"""The correction test's quota for a run tested on ``QUOTA_TEST_EPISODES`` episodes, and for ``lanro eval
---correction-test``: at least 300 spoken corrections put a 95% interval within about 6 points either side."""
-
-QUOTA_TEST_EPISODES = 500
-"""The ordinary test's size for which ``CORRECTION_QUOTA`` is written (the curricula's default)."""
 
 @dataclass(frozen=True)
 class Measurement:
@@ -216,12 +189,14 @@ def correction_test(
     """
     loaded = _load(path, device, _correction_settings(overrides or {}), check, acting_attention=acting_attention)
     first = correction_test_seed(loaded.settings.seed, loaded.settings.stage)
-    negations = loaded.env.negations
-    report = _run(loaded, quota.episodes, first, progress=progress, enough=lambda r: quota.met(r, negations))
+    negations, chains = loaded.env.negations, loaded.env.max_corrections > 1
+    if quota.second and not chains:
+        raise ValueError(f"a second correction is never spoken in {path}'s stage: it corrects at most once an episode")
+    report = _run(loaded, quota.episodes, first, progress=progress, enough=lambda r: quota.met(r, negations, chains))
     record = {
         **_record(loaded, {"correction_test": True, "first_seed": first}, Instruction.TRUE, report),
-        "quota": {**asdict(quota), "negations": quota.negations if negations else 0},
-        "quota_met": quota.met(report, negations),
+        "quota": {**asdict(quota), "negations": quota.negations if negations else 0, "second": quota.second if chains else 0},
+        "quota_met": quota.met(report, negations, chains),
     }
     return Measurement(loaded.settings, loaded.env, first, True, report, record)
 

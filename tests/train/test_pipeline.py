@@ -32,7 +32,8 @@ from lanrocli.train.runfolder import (
     write_pointer,
 )
 from lanrocli.train.seeds import correction_test_seed, evaluation_seed, held_out_seed, split_test_seed
-from lanrocli.train.testset import CORRECTION_QUOTA, Measurement, correction_test, split_test
+from lanrocli.train.quota import CORRECTION_QUOTA
+from lanrocli.train.testset import Measurement, correction_test, split_test
 from lanrocli.train.testset import once_per_agent as _once_per_agent
 from lanrocli.train.testset import records as _records
 from lanrocli.train.trainer import TrainSettings
@@ -191,7 +192,7 @@ def test_the_last_stage_ends_with_a_correction_test_of_both_agents(tmp_path: Pat
     for record in corrections.values():
         assert record["episodes_from"] == {"correction_test": True, "first_seed": correction_test_seed(5, 0)}
         assert record["env"]["correction_rate"] == 1.0 and record["env"]["negation_rate"] == 0.5
-        assert record["quota"] == {"spoken": quota.spoken, "negations": quota.negations, "episodes": quota.episodes}
+        assert record["quota"] == {"spoken": quota.spoken, "negations": quota.negations, "episodes": quota.episodes, "second": 0}
         assert record["episodes"] == quota.episodes or record["quota_met"]
     assert correction_test(tmp_path / "run" / "stage-1-third" / "last", quota).record == corrections["last"]
     assert "## Correction test" in (tmp_path / "run" / REPORT).read_text()

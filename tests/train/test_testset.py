@@ -4,23 +4,25 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 import pytest
 
 from lanrocli.agent.settings import BufferSettings, SACSettings
-from lanrocli.choices import CorrectionForm
-from lanrocli.envs.evaluation import EvaluationReport
-from lanrocli.envs.figures import ATTENTION, PHASES, PLAIN, EpisodeResult
+from lanrocli.envs.figures import ATTENTION, PHASES, PLAIN
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.language import Vocabulary
 from lanrocli.language import vocabulary as vocabulary_module
 from lanrocli.train.checkpoint import load_checkpoint, save_checkpoint
 from lanrocli.train.seeds import correction_test_seed, held_out_seed
+from lanrocli.train.quota import CorrectionQuota
+from lanrocli.envs.policies import arm_view
+from lanrocli.tasks import OracleMemory, make_task
+from lanrocli.train import testset as testset_module
 from lanrocli.train.testset import (
-    CORRECTION_QUOTA,
     CORRECTION_TEST_NEGATION_RATE,
-    QUOTA_TEST_EPISODES,
-    CorrectionQuota,
     _load,
     _run,
     correction_test,
@@ -43,26 +45,6 @@ def checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
         trainer.close()
 
 
-def spoken(forms: list[CorrectionForm | None]) -> EvaluationReport:
-    return EvaluationReport([EpisodeResult(True, 5, None, form, -4.0) for form in forms])
-
-
-def test_the_quota_needs_both_the_corrections_and_where_they_are_on_the_negations() -> None:
-    quota = CorrectionQuota(spoken=3, negations=2, episodes=10)
-    excuse, negation = CorrectionForm.EXCUSE, CorrectionForm.NEGATION
-    assert not quota.met(spoken([excuse, excuse, None, negation]), negations=True)
-    assert quota.met(spoken([excuse, excuse, None, negation]), negations=False)
-    assert not quota.met(spoken([negation, negation, None]), negations=True)
-    assert quota.met(spoken([negation, negation, excuse]), negations=True)
-
-
-def test_the_quota_is_sized_like_the_test() -> None:
-    assert CORRECTION_QUOTA.scaled(QUOTA_TEST_EPISODES) == CORRECTION_QUOTA
-    assert CORRECTION_QUOTA == CorrectionQuota(spoken=300, negations=150, episodes=3000)
-    assert CORRECTION_QUOTA.scaled(100) == CorrectionQuota(60, 30, 600)
-    assert CORRECTION_QUOTA.scaled(2) == CorrectionQuota(2, 1, 12)  # never below one
-
-
 def test_the_correction_test_has_episodes_and_settings_of_its_own_and_repeats_itself(checkpoint: Path) -> None:
     quota = CorrectionQuota(spoken=50, negations=25, episodes=4)  # an untrained agent is hardly ever corrected
     first = correction_test(checkpoint, quota)
@@ -71,7 +53,7 @@ def test_the_correction_test_has_episodes_and_settings_of_its_own_and_repeats_it
     assert first.first_seed not in range(held_out_seed(3, 1), held_out_seed(3, 1) + 10_000)
     assert record["env"]["correction_rate"] == 1.0 and record["env"]["negation_rate"] == CORRECTION_TEST_NEGATION_RATE
     assert record["episodes"] == 4 and record["correction_episodes"] == 4 and not record["quota_met"]
-    assert record["quota"] == {"spoken": 50, "negations": 25, "episodes": 4}
+    assert record["quota"] == {"spoken": 50, "negations": 25, "episodes": 4, "second": 0}
     shares = record[ATTENTION]
     assert set(shares) == set(PHASES) and 0.0 <= shares[PLAIN] <= 1.0
     assert correction_test(checkpoint, quota).record == record
@@ -84,6 +66,49 @@ def test_the_correction_test_stops_once_its_quota_is_met(checkpoint: Path) -> No
     # One episode in which no correction is spoken meets a quota of none: the test stops after it.
     record = correction_test(checkpoint, CorrectionQuota(spoken=0, negations=0, episodes=5)).record
     assert record["episodes"] == 1 and record["quota_met"]
+
+
+class _WrongTwice:
+    """Reaches a wrong object, after the first correction the other wrong one, after the second the goal: the
+    arm that chains of corrections are for."""
+
+    def __init__(self, policy: AgentPolicy) -> None:
+        self.agent, self.vocabulary = policy.agent, policy.vocabulary  # the record and the episodes read them
+        self.task = make_task("reach")
+
+    def reset(self, seed: int | None = None) -> None:
+        pass
+
+    def act(self, observation: dict[str, np.ndarray], info: dict[str, Any]) -> np.ndarray:
+        goal = int(info["goal_index"])
+        wrong = [k for k in range(len(info["objects"])) if k != goal]
+        said = 0 if info["correction"] is None else int(info["correction"]["index"])
+        target = wrong[said] if said < len(wrong) else goal
+        return self.task.oracle(arm_view(observation, info, target), OracleMemory())
+
+
+def test_the_correction_test_runs_on_until_enough_second_corrections_were_spoken(
+    checkpoint: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    chains = EnvSettings(objects=3, mode="colour_shape", correction_rate=0.5, max_corrections=2, max_episode_steps=60)
+    settings = TrainSettings(task="reach", env=chains, seed=3, stage=1, buffer=BufferSettings(size=10))
+    trainer = Trainer(settings, SACSettings(hidden_size=16, obs_size=16, architecture="objects"))
+    try:
+        path = trainer.save(tmp_path / "stage-2-chains" / "checkpoint", resumable=False)
+    finally:
+        trainer.close()
+    loaded = testset_module.load_policy
+    monkeypatch.setattr(testset_module, "load_policy", lambda *a: (lambda s, p: (s, _WrongTwice(p)))(*loaded(*a)))
+    first_only = correction_test(path, CorrectionQuota(spoken=3, negations=0, episodes=40)).report.results
+    waiting = correction_test(path, CorrectionQuota(spoken=3, negations=0, episodes=40, second=5))
+    seconds = [i for i, r in enumerate(waiting.report.results) if r.corrections >= 2]
+    assert len(seconds) == 5 and seconds[-1] == len(waiting.report.results) - 1  # it stops at the fifth
+    assert len(first_only) < len(waiting.report.results) and waiting.record["quota_met"]
+    assert waiting.record["quota"]["second"] == 5 == waiting.record["by_index"]["2"]["episodes"]
+    assert waiting.report.results[: len(first_only)] == first_only  # the same episodes, run on
+    # A stage that corrects once an episode never speaks a second correction: asking for one is an error.
+    with pytest.raises(ValueError, match="never spoken"):
+        correction_test(checkpoint, CorrectionQuota(spoken=1, negations=0, episodes=4, second=1))
 
 
 def test_the_ordinary_measure_keeps_the_stage_and_its_test_episodes(checkpoint: Path) -> None:
