@@ -214,6 +214,8 @@ def test_quick_training_run_then_eval_plot_and_refusals(tmp_path) -> None:
     tested = json.loads((out / "stage-3-negations" / "test.json").read_text())
     assert set(tested) == {"last", "best", "language", "correction_test"}
     assert set(tested["language"]) == {"true", "blank", "other"} and set(tested["correction_test"]) == {"last", "best"}
+    blank = tested["language"]["blank"]
+    assert blank["named_first"]["episodes"] == blank["episodes"] and "| instruction | success | named object first |" in report_text
     assert "## Correction test" in report_text
     corrections = runner.invoke(app, ["eval", str(out), "--correction-test", "--json"])
     assert corrections.exit_code == 0, corrections.output

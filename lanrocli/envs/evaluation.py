@@ -54,6 +54,13 @@ class EvaluationReport:
     def corrected(self) -> Rate:
         return self.rate("corrected_success")
 
+    @property
+    def named_first(self) -> Rate:
+        """All episodes, counted as won where the first object the task's condition held for was the one the
+        sentence names: with a blank sentence, a policy that picks an object at random gets 1/objects here
+        whatever it does after a wrong one (:attr:`EpisodeResult.named_first`)."""
+        return Rate(len(self.results), sum(r.named_first for r in self.results))
+
     def by_kind(self) -> dict[str, Rate]:
         """Episodes set up with each kind of misunderstanding met, whether or not a correction was spoken."""
         kinds = sorted({r.challenge for r in self.results if r.challenge is not None})
@@ -115,6 +122,7 @@ class EvaluationReport:
             "success_ci": list(overall.interval),
             "mean_length": self.mean_length,
             "mean_return": self.mean_return,
+            "named_first": self.named_first.as_dict(),
             "correction_episodes": episodes.episodes,
             "correction_episode_success": episodes.value,
             "correction_episode_success_ci": list(episodes.interval),

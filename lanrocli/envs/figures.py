@@ -56,6 +56,10 @@ class EpisodeResult:
     the goal, and the number of those steps. Empty for a policy without attention."""
     corrections: int = 0
     """How many corrections were spoken (more than one only where a stage allows chains of them)."""
+    named_first: bool = False
+    """Whether the first object the task's condition held for was the one the sentence names (the goal, or
+    the object an ``other`` sentence names); False where it held for none. Success alone cannot tell an arm
+    that read its sentence from one that moves on to the next object after a wrong one."""
 
     @property
     def corrected(self) -> bool:

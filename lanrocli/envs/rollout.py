@@ -75,6 +75,7 @@ class Episode:
     total: float = field(init=False, default=0.0)
     length: int = field(init=False, default=0)
     shares: dict[str, list[float]] = field(init=False, default_factory=dict)
+    named_first: bool | None = field(init=False, default=None)
 
     def __post_init__(self) -> None:
         self.observation, self.info = self.env.reset(seed=self.seed)
@@ -101,6 +102,8 @@ class Episode:
         episode's result once it has ended, else None."""
         self.observation, _, terminated, truncated, self.info = outcome
         achieved = bool(self.info["achieved"][self.target])
+        if self.named_first is None and np.any(self.info["achieved"]):
+            self.named_first = achieved
         self.total += reward(achieved)
         self.length += 1
         if self.frames is not None:
@@ -116,6 +119,7 @@ class Episode:
             returned=self.total,
             attention={phase: (sum(values), len(values)) for phase, values in self.shares.items()},
             corrections=0 if correction is None else int(correction["index"]),
+            named_first=bool(self.named_first),
         )
 
 

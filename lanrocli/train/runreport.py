@@ -112,14 +112,18 @@ def _test_lines(tests: dict[int, tuple[str, dict[str, Any]]]) -> list[str]:
             "",
             "`true`: the instructor's sentence; `blank`: no words; `other`: a sentence naming another object, "
             "won when the task holds for that object. An agent that reads its instruction is near chance "
-            "with `blank` and about as good with `other` as with `true`.",
+            "with `blank` and about as good with `other` as with `true`. *Named object first*: the share of "
+            "episodes in which the first object the task held for was the one the sentence names (the goal "
+            "for `blank`), where chance is one in as many objects; an arm that moves on from a wrong object "
+            "to the next can win more than chance with `blank`, never more here.",
             "",
-            "| instruction | success |",
-            "|---|---|",
+            "| instruction | success | named object first |",
+            "|---|---|---|",
         ]
         for shown, r in language.items():
             overall = {"episodes": r["episodes"], "success": r["success"], "ci": r["success_ci"]}
-            lines.append(f"| {shown} | {with_interval(overall)} |")
+            first = with_interval(r["named_first"]) if "named_first" in r else "-"
+            lines.append(f"| {shown} | {with_interval(overall)} | {first} |")
     corrections = next(
         (record[CORRECTION_TEST] for _, record in reversed(tests.values()) if CORRECTION_TEST in record), None
     )

@@ -224,3 +224,18 @@ def test_per_correction_counts_add_up() -> None:
     assert len(only_one) + after_second["episodes"] == record["corrected"]["episodes"]
     metrics = EvaluationReport(results).metrics()
     assert metrics["corrected_episodes_after_2"] == 3
+
+
+def test_named_first_tells_an_arm_that_reads_from_one_that_moves_on(env: LanroEnv) -> None:
+    oracle = make_policy("oracle", "reach")
+    reads = evaluate(env, oracle, 5, seed=3)
+    assert reads.named_first.successes == 5 and reads.as_dict()["named_first"]["success"] == 1.0
+    # The oracle ignores the sentence: told of another object, it still reaches the goal first.
+    assert evaluate(env, oracle, 5, seed=3, instruction_shown=Instruction.OTHER).named_first.successes == 0
+    # An arm that acts on a wrong object and then, corrected, on the goal wins without the goal first.
+    corrected = LanroEnv("reach", objects=2, correction_rate=1.0)
+    try:
+        moved_on = evaluate(corrected, make_policy("mistaken", "reach"), 5, seed=3)
+    finally:
+        corrected.close()
+    assert moved_on.overall.successes >= 4 and moved_on.named_first.successes == 0
