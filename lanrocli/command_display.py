@@ -96,10 +96,8 @@ def print_evaluation(report: EvaluationReport, title: str) -> None:
     if unjudged:
         console.print(f"* fewer than {JUDGED} spoken corrections: shown, not judged", highlight=False)
     console.print(f"mean episode length {report.mean_length:.1f} steps, mean return {report.mean_return:.1f}")
-    first = report.named_first
-    console.print(
-        f"the named object was the first the task held for in {_percent(first.success).strip()} of the episodes", highlight=False
-    )
+    first = _percent(report.named_first.success).strip()
+    console.print(f"the named object was the first the task held for in {first} of the episodes", highlight=False)
     attention = report.attention_on_goal()
     if attention is not None:
         shares = ", ".join(f"{phase} {'-' if v is None else f'{v:.2f}'}" for phase, v in attention.items())

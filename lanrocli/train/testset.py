@@ -195,7 +195,9 @@ def correction_test(
     report = _run(loaded, quota.episodes, first, progress=progress, enough=lambda r: quota.met(r, negations, chains))
     record = {
         **_record(loaded, {"correction_test": True, "first_seed": first}, Instruction.TRUE, report),
-        "quota": {**asdict(quota), "negations": quota.negations if negations else 0, "second": quota.second if chains else 0},
+        "quota": {
+            **asdict(quota), "negations": quota.negations if negations else 0, "second": quota.second if chains else 0
+        },
         "quota_met": quota.met(report, negations, chains),
     }
     return Measurement(loaded.settings, loaded.env, first, True, report, record)
