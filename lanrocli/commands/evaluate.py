@@ -160,9 +160,9 @@ def evaluate_command(
         )
         quota = record["quota"]
         negations = f" and {quota['negations']} negations" if quota["negations"] else ""
-        negations += f" and {quota['second']} second corrections" if quota.get("second") else ""
+        seconds = f" and {quota['second']} second corrections" if quota.get("second") else ""
         met = "reached" if record["quota_met"] else f"not reached in {quota['episodes']} episodes"
-        where = f"correction test ({quota['spoken']} spoken corrections{negations}: {met})"
+        where = f"correction test ({quota['spoken']} spoken corrections{negations}{seconds}: {met})"
     else:
         agent = _trained_agent(what)
         measurement = _measure_checkpoint(

@@ -37,7 +37,6 @@ CORRECTION_TEST_NEGATION_RATE = 0.5
 """Share of the correction test's spoken corrections that are negations, where the stage allows them."""
 
 
-
 @dataclass(frozen=True)
 class Measurement:
     """What one measurement of a checkpoint found, and the record of it for files and ``--json``."""
@@ -195,9 +194,7 @@ def correction_test(
     report = _run(loaded, quota.episodes, first, progress=progress, enough=lambda r: quota.met(r, negations, chains))
     record = {
         **_record(loaded, {"correction_test": True, "first_seed": first}, Instruction.TRUE, report),
-        "quota": {
-            **asdict(quota), "negations": quota.negations if negations else 0, "second": quota.second if chains else 0
-        },
+        "quota": {**asdict(quota), "negations": quota.negations if negations else 0},
         "quota_met": quota.met(report, negations, chains),
     }
     return Measurement(loaded.settings, loaded.env, first, True, report, record)
