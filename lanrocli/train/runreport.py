@@ -111,11 +111,12 @@ def _test_lines(tests: dict[int, tuple[str, dict[str, Any]]]) -> list[str]:
             "## Language check: the final agent on plain test episodes",
             "",
             "`true`: the instructor's sentence; `blank`: no words; `other`: a sentence naming another object, "
-            "won when the task holds for that object. An agent that reads its instruction is near chance "
-            "with `blank` and about as good with `other` as with `true`. *Named object first*: the share of "
-            "episodes in which the first object the task held for was the one the sentence names (the goal "
-            "for `blank`), where chance is one in as many objects; an arm that moves on from a wrong object "
-            "to the next can win more than chance with `blank`, never more here.",
+            "won when the task holds for that object. *Named object first*: the share of episodes in which "
+            "the first object the task held for was the one the sentence names (the goal for `blank`). The "
+            "check is judged on it: an agent that reads its instruction puts the named object first about as "
+            "often with `other` as with `true`, and with `blank` at or below chance, one in as many objects. "
+            "Success with `blank` can exceed chance where an arm moves on from a wrong object to the next, "
+            "which a plain episode does not punish; the object it goes to first cannot.",
             "",
             "| instruction | success | named object first |",
             "|---|---|---|",
