@@ -2,17 +2,22 @@
 spent waiting for the simulation, sampling (and relabelling) batches, and updating the networks.
 
 Settings: reach with 2 objects, 2 environments (subprocesses), one update per environment step, batch 256
-(``--batch-size``, for both agents), on the CPU (``--device``, for both agents), updates starting after ``--learning-starts`` steps. If stable-baselines3
+(``--batch-size``, for both agents), on the CPU (``--device``, for both agents), updates starting after ``--learning-starts`` steps.
+Our agent is ``SACSettings``' default network (``--architecture``), or with ``--curriculum`` the agent and replay
+buffer a curriculum trains (its batch size too, unless ``--batch-size`` is given): ``--curriculum reach`` is the
+agent every shipped curriculum inherits. If stable-baselines3
 is installed, its SAC (``MultiInputPolicy``, same batch, same update ratio, same environment, same steps) runs
 in the same session and the ratio is printed. With ``--rounds N`` the two alternate N times and the medians
 are reported, which evens out a shared machine's drift better than one long run each.
 
     python benchmarks/train_throughput.py --steps 2000 --rounds 3
+    python benchmarks/train_throughput.py --steps 2000 --rounds 3 --curriculum reach
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import statistics
 import time
@@ -20,9 +25,10 @@ from typing import Any
 
 import torch
 
-from lanrocli.agent.settings import SACSettings
+from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.train.curriculum import find_curriculum, load_curriculum
 from lanrocli.train.trainer import Trainer, TrainSettings
 
 
@@ -44,10 +50,12 @@ class Stopwatch:
 
 
 def run_ours(
-    steps: int, envs: int, learning_starts: int, seed: int, architecture: str, batch_size: int, device: str
+    steps: int, envs: int, learning_starts: int, seed: int, agent: SACSettings, buffer: BufferSettings, device: str
 ) -> dict[str, float]:
-    settings = TrainSettings(task="reach", env=EnvSettings(objects=2), seed=seed, envs=envs, learning_starts=learning_starts)
-    trainer = Trainer(settings, SACSettings(batch_size=batch_size, architecture=architecture), device=device)
+    settings = TrainSettings(
+        task="reach", env=EnvSettings(objects=2), seed=seed, envs=envs, learning_starts=learning_starts, buffer=buffer
+    )
+    trainer = Trainer(settings, agent, device=device)
     simulation, sampling, updating = Stopwatch(), Stopwatch(), Stopwatch()
     trainer.run(envs)  # start the environments before the clock
     collector = trainer._collector
@@ -105,22 +113,30 @@ def main() -> None:
     parser.add_argument("--learning-starts", type=int, default=500)
     parser.add_argument("--threads", type=int, default=1, help="torch threads (both agents)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--batch-size", type=int, default=256, help="of both agents")
-    parser.add_argument("--architecture", choices=["flat", "objects"], default="flat", help="of our agent")
+    parser.add_argument("--batch-size", type=int, help="of both agents (default: 256, or the curriculum's)")
+    parser.add_argument("--architecture", choices=["flat", "objects"], help="of our agent (default: flat)")
+    parser.add_argument("--curriculum", help="our agent and buffer are this curriculum's (a packaged name or a file)")
     parser.add_argument("--rounds", type=int, default=1, help="alternate ours and stable-baselines3 this many times")
     parser.add_argument("--device", default="cpu", help="where both agents learn: cpu, cuda or cuda:N")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     if args.rounds < 1:
         parser.error("--rounds must be at least 1")
+    if args.curriculum is not None and args.architecture is not None:
+        parser.error("--architecture and --curriculum both choose our agent: give one")
     torch.set_num_threads(args.threads)
+    if args.curriculum is not None:
+        curriculum = load_curriculum(find_curriculum(args.curriculum))
+        agent, buffer = curriculum.agent.settings(), curriculum.buffer.settings()
+    else:
+        agent, buffer = SACSettings(architecture=args.architecture or "flat"), BufferSettings()
+    if args.batch_size is not None:
+        agent = dataclasses.replace(agent, batch_size=args.batch_size)
 
     rounds = []
     for _ in range(args.rounds):
-        result = run_ours(
-            args.steps, args.envs, args.learning_starts, args.seed, args.architecture, args.batch_size, args.device
-        )
-        sb3 = run_sb3(args.steps, args.envs, args.learning_starts, args.seed, args.batch_size, args.device)
+        result = run_ours(args.steps, args.envs, args.learning_starts, args.seed, agent, buffer, args.device)
+        sb3 = run_sb3(args.steps, args.envs, args.learning_starts, args.seed, agent.batch_size, args.device)
         if sb3 is not None:
             result.update(sb3, ratio=result["env_steps_per_s"] / sb3["sb3_env_steps_per_s"])
         rounds.append(result)

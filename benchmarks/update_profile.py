@@ -1,9 +1,11 @@
 """Where one SAC update's time goes: the agent of a curriculum (reach.yaml's by default, which every shipped
-curriculum inherits) collects ``--collect`` steps on reach with two objects, then ``--updates`` updates run
-under torch's profiler. Prints the update's mean time, how many tensor operations one update runs, and
+curriculum inherits) collects ``--collect`` steps in one of its stages (``--stage``, counted from 1; by default
+the first, whose short sentences favour no reader; the last stage's hold corrections and chains), then
+``--updates`` updates run under torch's profiler. Prints the update's mean time, how many tensor operations one update runs, and
 the operations that take the most time, so that a change to the update is judged by what it removes.
 
     python benchmarks/update_profile.py --updates 200
+    python benchmarks/update_profile.py --updates 200 --stage 3
 """
 
 from __future__ import annotations
@@ -13,7 +15,6 @@ import time
 import torch
 from torch.profiler import ProfilerActivity, profile
 
-from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.curriculum import find_curriculum, load_curriculum
 from lanrocli.train.trainer import Trainer, TrainSettings
 
@@ -21,6 +22,7 @@ from lanrocli.train.trainer import Trainer, TrainSettings
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--curriculum", default="reach", help="whose agent settings (a packaged name or a file)")
+    parser.add_argument("--stage", type=int, default=1, help="whose environment collects the batches (from 1)")
     parser.add_argument("--collect", type=int, default=1500)
     parser.add_argument("--updates", type=int, default=200)
     parser.add_argument("--top", type=int, default=15)
@@ -28,9 +30,12 @@ def main() -> None:
     torch.set_num_threads(1)
 
     curriculum = load_curriculum(find_curriculum(args.curriculum))
+    if not 1 <= args.stage <= len(curriculum.stages):
+        parser.error(f"--stage must be from 1 to {len(curriculum.stages)}, the stages of {args.curriculum}")
     settings = TrainSettings(
-        task="reach", env=EnvSettings(objects=2), envs=2, learning_starts=args.collect + 1,
-        buffer=curriculum.buffer.settings(),
+        task=curriculum.task, env=curriculum.stages[args.stage - 1].env.settings(), envs=2,
+        learning_starts=args.collect + 1, buffer=curriculum.buffer.settings(), object_slots=curriculum.max_objects,
+        max_corrections=curriculum.max_corrections, stage=args.stage - 1,
     )
     trainer = Trainer(settings, curriculum.agent.settings())
     trainer.run(args.collect)
@@ -52,7 +57,7 @@ def main() -> None:
     events = prof.key_averages()
     ops = sum(e.count for e in events if e.key.startswith("aten::"))
     s = agent.settings
-    print(f"{args.curriculum}'s agent ({s.architecture}, critics {s.critics}, batch {s.batch_size}): "
+    print(f"{args.curriculum}'s agent, stage {args.stage} ({s.architecture}, critics {s.critics}, batch {s.batch_size}): "
           f"{seconds * 1000:.2f} ms per update, {ops / len(batches):.0f} aten operations per update")
     print(events.table(sort_by="self_cpu_time_total", row_limit=args.top))
 

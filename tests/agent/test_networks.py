@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lanrocli.agent.encoder import LanguageEncoder, _summarise, encode
+from lanrocli.agent.encoder import LanguageEncoder, _distinct_rows, _summarise, encode
 from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, ObjectLayout, SceneReader
 from lanrocli.language import grammar_vocabulary, sample_sentence
 
@@ -53,6 +53,18 @@ def test_repeated_sentences_give_the_gradients_of_encoding_every_row() -> None:
     (_summarise([reference], tokens)[0] * weights).sum().backward()
     for a, b in zip(shared.parameters(), reference.parameters()):
         torch.testing.assert_close(a.grad, b.grad)
+
+
+def test_distinct_rows_are_torch_uniques_in_its_order() -> None:
+    """Its order decides how sentences are packed for the GRU, and so the last bits of every update: it must
+    be torch.unique's, which it replaces, so that runs keep their numbers."""
+    generator = torch.Generator().manual_seed(0)
+    batches = [_sentences(128, seed=1), torch.zeros(4, 6, dtype=torch.int64)]
+    batches += [torch.randint(0, high, (60, width), generator=generator) for high, width in ((3, 5), (300, 9), (2**40, 2))]
+    for tokens in batches:
+        expected, expected_inverse = torch.unique(tokens, dim=0, return_inverse=True)
+        rows, inverse = _distinct_rows(tokens)
+        assert torch.equal(rows, expected) and torch.equal(inverse, expected_inverse)
 
 
 def test_encoding_together_gives_each_encoders_own_summaries() -> None:
