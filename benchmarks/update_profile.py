@@ -1,7 +1,7 @@
 """Where one SAC update's time goes: the agent of a curriculum (reach.yaml's by default, which every shipped
-curriculum inherits) collects ``--collect`` steps in one of its stages (``--stage``, counted from 1; by default
-the first, whose short sentences favour no reader; the last stage's hold corrections and chains), then
-``--updates`` updates run under torch's profiler. Prints the update's mean time, how many tensor operations one update runs, and
+curriculum inherits) collects ``--collect`` steps in one of its stages (``--stage``, counted from 1, the first
+by default; the last stage's batches hold corrections and chains), then ``--updates`` updates run under
+torch's profiler. Prints the update's mean time, how many tensor operations one update runs, and
 the operations that take the most time, so that a change to the update is judged by what it removes.
 
     python benchmarks/update_profile.py --updates 200

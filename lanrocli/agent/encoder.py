@@ -68,9 +68,10 @@ def _distinct(tokens: torch.Tensor, vocab_size: int) -> tuple[torch.Tensor, torc
 
 
 def _distinct_rows(tokens: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """What ``torch.unique(tokens, dim=0, return_inverse=True)`` gives, rows in the same order, in a tenth of
-    its time: NumPy sorts each row as one byte string, where ``torch.unique`` compares rows element by element.
-    Big-endian bytes of non-negative ids sort as the ids do, so the order is the rows' lexicographic order."""
+    """What ``torch.unique(tokens, dim=0, return_inverse=True)`` gives, rows in the same order (so an update's
+    numbers do not change), with far fewer operator calls: NumPy sorts each row as one byte string, where
+    ``torch.unique`` compares rows element by element (docs/performance.md). Big-endian bytes of non-negative
+    ids sort as the ids do, so the order is the rows' lexicographic order."""
     rows = np.ascontiguousarray(tokens.cpu().numpy().astype(">i8"))
     keys = rows.view(np.dtype((np.void, rows.itemsize * rows.shape[1]))).ravel()
     _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
