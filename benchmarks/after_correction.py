@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from lanrocli.choices import ActingAttention
 from lanrocli.envs.env import LanroEnv
 from lanrocli.tasks.reach import REACH_STILL
 from lanrocli.tasks.registry import task_class
@@ -91,9 +92,14 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--kinds", nargs="+", default=["ambiguity", "instruction_correction"])
+    parser.add_argument(
+        "--acting-attention", choices=[a.value for a in ActingAttention], help="default: as the agent was trained"
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
     settings, policy = load_policy(agent_path(args.checkpoint))
+    if args.acting_attention is not None:
+        policy.agent.act_by(ActingAttention(args.acting_attention))
     env_settings = settings.env.for_evaluation().replace(correction_rate=1.0, kinds=tuple(args.kinds))
     env = LanroEnv(
         settings.task, env_settings, object_slots=settings.slots, vocabulary=policy.vocabulary, holdout=settings.holdout
