@@ -158,7 +158,7 @@ def print_plan(plan: Curriculum) -> None:
     console.print(table)
     console.print(f"at most {plan.total_steps:,} environment steps in all")
     console.print(
-        f"evaluation: {plan.eval.episodes} fresh episodes every {plan.eval.every:,} steps of a stage, and at its end; "
+        f"evaluation: {plan.eval.described()} every {plan.eval.every:,} steps of a stage, and at its end; "
         f"test: {plan.test.episodes} held-out episodes for each stage's last and best agents"
     )
     for name, section in (("agent", plan.agent), ("buffer", plan.buffer)):

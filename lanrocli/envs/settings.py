@@ -113,10 +113,15 @@ class EnvSettings:
             return self.max_episode_steps
         return CORRECTION_LIMIT if self.correction_rate > 0 else PLAIN_LIMIT
 
-    def for_evaluation(self) -> EnvSettings:
+    def for_evaluation(self, correction_rate: float | None = None) -> EnvSettings:
         """These settings as evaluation uses them: every episode starts from the neutral pose (random and
-        object starts are for training), so success is comparable across runs and curricula."""
-        return dataclasses.replace(self, random_start=0.0, object_start=0.0)
+        object starts are for training), so success is comparable across runs and curricula.
+        ``correction_rate``, where given, replaces a non-zero share of correction episodes; settings without
+        corrections keep none, since their episodes are not built to hold one."""
+        changes: dict[str, Any] = {"random_start": 0.0, "object_start": 0.0}
+        if correction_rate is not None and self.correction_rate > 0:
+            changes["correction_rate"] = correction_rate
+        return dataclasses.replace(self, **changes)
 
     def check_task(self, task: str) -> None:
         """The settings that only some tasks accept: object starts need a gripper to open."""

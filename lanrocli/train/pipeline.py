@@ -336,6 +336,7 @@ def _train_settings(curriculum: Curriculum) -> TrainSettings:
         seed=curriculum.seed,
         envs=curriculum.envs,
         eval_episodes=curriculum.eval.episodes,
+        eval_correction_rate=curriculum.eval.correction_rate,
         learning_starts=curriculum.learning_starts,
         updates_per_step=curriculum.updates_per_step,
         buffer=curriculum.buffer.settings(),

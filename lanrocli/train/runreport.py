@@ -31,8 +31,8 @@ def render_report(curriculum: Curriculum, state: RunState, out: Path) -> str:
     lines = [
         f"# {curriculum.name}: {curriculum.task}",
         "",
-        f"Seed {curriculum.seed}, {curriculum.envs} environments; evaluation on {curriculum.eval.episodes} fresh "
-        f"episodes every {curriculum.eval.every:,} steps; each stage's agents tested on "
+        f"Seed {curriculum.seed}, {curriculum.envs} environments; evaluation on {curriculum.eval.described()} "
+        f"every {curriculum.eval.every:,} steps; each stage's agents tested on "
         f"{curriculum.test.episodes} held-out episodes.",
         "",
         *_stage_lines(curriculum, state),

@@ -129,6 +129,17 @@ class EvalConfig(BaseModel):
     every: int = Field(10_000, gt=0)
     """Environment steps between evaluations."""
     episodes: int = Field(100, gt=0)
+    correction_rate: float | None = Field(None, gt=0.0, le=1.0)
+    """Share of the evaluation episodes that are correction episodes in a stage that speaks corrections (a
+    stage without them keeps none); ``None``: the stage's own share. A rule ``on: corrected`` is judged on the
+    episodes in which a correction was spoken; at 1 an evaluation speaks about twice as many of them as at
+    0.5, for the same episodes, so a lucky run of evaluations ends a stage less often. Tests keep the stage's
+    share."""
+
+    def described(self) -> str:
+        share = self.correction_rate
+        where = "" if share is None else f" ({share:.0%} of them correction episodes where a stage speaks corrections)"
+        return f"{self.episodes} fresh episodes{where}"
 
 
 class HeldOutConfig(BaseModel):

@@ -59,6 +59,8 @@ class TrainSettings:
     seed: int = 0
     envs: int = 1
     eval_episodes: int = 20
+    eval_correction_rate: float | None = None
+    """Correction episodes' share in evaluations where the stage speaks corrections; ``None``: the stage's."""
     learning_starts: int = 1000
     """Environment steps collected before the first update."""
     updates_per_step: float = 1.0
@@ -108,10 +110,7 @@ class TrainSettings:
         return int(np.random.SeedSequence([self.seed, self.stage]).generate_state(1)[0])
 
     def to_dict(self) -> dict[str, Any]:
-        data = dataclasses.asdict(self)
-        data["env"] = self.env.to_dict()
-        data["holdout"] = self.holdout.to_dict()
-        return data
+        return {**dataclasses.asdict(self), "env": self.env.to_dict(), "holdout": self.holdout.to_dict()}
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> TrainSettings:
@@ -214,7 +213,7 @@ class Trainer:
         """Builds environments of the current stage, observed through the run's object slots. A plain
         partial, so that subprocesses receive the settings and not the trainer."""
         s = self.settings
-        env = s.env.for_evaluation() if evaluation else s.env
+        env = s.env.for_evaluation(s.eval_correction_rate) if evaluation else s.env
         return functools.partial(
             LanroEnv, s.task, env, object_slots=s.slots, vocabulary=self.vocabulary, holdout=s.holdout
         )

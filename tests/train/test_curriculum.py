@@ -182,6 +182,14 @@ def test_promote_statistic_is_mean_or_lower_bound(tmp_path: Path) -> None:
     assert problem.path == "stages[0].promote.statistic" and "lower_bound" in problem.message
 
 
+def test_evaluation_correction_share_is_a_probability_above_zero(tmp_path: Path) -> None:
+    curriculum = load_curriculum(write(tmp_path, "c.yaml", "eval: {correction_rate: 1}\n" + MINIMAL))
+    assert curriculum.eval.correction_rate == 1.0 and "100% of them correction episodes" in curriculum.eval.described()
+    assert load_curriculum(write(tmp_path, "d.yaml", MINIMAL)).eval.described() == "100 fresh episodes"
+    problem = only_problem(write(tmp_path, "e.yaml", "eval: {correction_rate: 0}\n" + MINIMAL))
+    assert (problem.line, problem.path) == (1, "eval.correction_rate") and "greater than 0" in problem.message
+
+
 def test_common_ground_needs_rare_words(tmp_path: Path) -> None:
     text = MINIMAL + "    env: {correction_rate: 0.5, kinds: [common_ground]}\n"
     problem = only_problem(write(tmp_path, "c.yaml", text))

@@ -31,6 +31,7 @@ from lanrocli.train.runfolder import (
     step_checkpoint,
     write_pointer,
 )
+from lanrocli.train.runreport import render_report
 from lanrocli.train.seeds import correction_test_seed, evaluation_seed, held_out_seed, split_test_seed
 from lanrocli.train.quota import CORRECTION_QUOTA
 from lanrocli.train.testset import Measurement, correction_test, split_test
@@ -128,6 +129,16 @@ def test_a_rule_on_corrected_ignores_episodes_without_a_spoken_correction(tmp_pa
     run.close()
     assert [r["rule_holds"] for r in rows(tmp_path / "run")] == ["0", "1"]
     assert run.state.results[0].ended == "promoted"
+
+
+def test_the_evaluation_correction_share_reaches_the_trainer_and_the_report(tmp_path: Path) -> None:
+    data = load_curriculum(tiny(tmp_path)).model_dump()
+    data["eval"]["correction_rate"] = 1.0
+    curriculum = Curriculum.model_validate(data)
+    run = CurriculumRun.start(curriculum, tmp_path / "run")
+    assert run.trainer.settings.eval_correction_rate == 1.0
+    assert "100% of them correction episodes" in render_report(curriculum, run.state, tmp_path / "run")
+    run.close()
 
 
 def test_on_budget_stop_ends_the_run_and_the_report_says_so(tmp_path: Path) -> None:

@@ -82,6 +82,19 @@ def test_random_starts_are_for_training_only() -> None:
     evaluation.close()
 
 
+def test_evaluations_may_speak_corrections_in_every_episode_while_training_keeps_its_share() -> None:
+    settings = dataclasses.replace(SETTINGS, eval_correction_rate=1.0)
+    trainer = Trainer(settings, AGENT)
+    training, evaluation = trainer.env_factory()(), trainer.env_factory(evaluation=True)()
+    challenges = [[env.reset(seed=seed)[1]["challenge"] for seed in range(20)] for env in (training, evaluation)]
+    assert None in challenges[0] and any(c is not None for c in challenges[0])
+    assert None not in challenges[1]
+    assert TrainSettings.from_dict(settings.to_dict()) == settings
+    assert TrainSettings.from_dict({k: v for k, v in SETTINGS.to_dict().items() if k != "eval_correction_rate"}) == SETTINGS
+    training.close()
+    evaluation.close()
+
+
 def test_sentences_have_room_for_the_longest_chain_of_corrections_from_the_first_stage() -> None:
     chained = dataclasses.replace(SETTINGS, max_corrections=2)  # a later stage corrects twice
     trainer = Trainer(chained, AGENT)
