@@ -120,6 +120,8 @@ def env_summary(env: EnvSettings) -> str:
         parts.append(f"random starts {env.random_start:g}")
     if env.object_start:
         parts.append(f"starts around an object {env.object_start:g}")
+    if env.mistake_start:
+        parts.append(f"starts after a mistake {env.mistake_start:g}")
     return ", ".join(parts)
 
 

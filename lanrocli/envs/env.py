@@ -16,6 +16,7 @@ from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.reward import reward
 from lanrocli.sim import (
     MAX_FINGER_WIDTH,
+    MAX_STEP,
     OBJECT_AREA,
     SHAPES as SIM_SHAPES,
     WORKSPACE,
@@ -25,7 +26,7 @@ from lanrocli.sim import (
     action_size,
     resting_position,
 )
-from lanrocli.tasks import TaskView, make_task
+from lanrocli.tasks import ArmView, OracleMemory, TaskView, make_task
 
 ARM_SIZE = 7
 """End-effector position (3), its linear velocity (3), finger width (1)."""
@@ -47,6 +48,10 @@ START_CLEARANCE = 0.01
 
 START_TRIES = 50
 """Random start positions tried before falling back to the neutral pose (nine in ten are clear)."""
+
+MISTAKE_STEPS = 40
+"""Most steps the scripted oracle is given to do the task on a wrong object at a mistake start (it needs 10
+to 20); a start whose oracle has not finished by then begins where it got to."""
 
 FALLEN = -0.05
 """An object whose centre is lower than this (m) has fallen off the table. The goal's fall ends the episode,
@@ -84,8 +89,9 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     lift the reward is therefore not a function of the observation alone.
 
     Episodes start with the end effector at (0, 0, 0.10); ``random_start`` is the share that starts at a
-    random point of the workspace near the table instead, clear of the objects, and ``object_start`` (grasp
-    and lift) the share that starts with the open hand around a random object (both for training).
+    random point of the workspace near the table instead, clear of the objects, ``object_start`` (grasp
+    and lift) the share that starts with the open hand around a random object, and ``mistake_start`` the
+    share that starts with the task just done on a wrong object (all for training).
 
     ``instruction`` is the current goal sentence (instruction, plus the correction from the step it is
     spoken) as token ids of ``vocabulary`` (by default the grammar's; an agent's own when one is run),
@@ -207,6 +213,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             self._properties[k, COLOURS.index(obj.colour)] = 1.0
             self._properties[k, len(COLOURS) + SHAPES.index(obj.shape)] = 1.0
         self.instructor.start(rng, scene, challenge)
+        if self.settings.mistake_start > 0.0 and rng.random() < self.settings.mistake_start:
+            self._act_on_a_wrong_object(rng)
         self._tokens = self.vocabulary.encode(self.instructor.text)
         self._steps = 0
         self._achieved = self._evaluate()
@@ -242,6 +250,23 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         position = self.objects.states().positions[target]
         self.robot.reset(MAX_FINGER_WIDTH, ee_position=position)
         return self.robot.clear_of(self.objects.body_ids, 0.0)
+
+    def _act_on_a_wrong_object(self, rng: np.random.Generator) -> None:
+        """The task done on a random wrong object by the scripted oracle before the first step, unseen by the
+        instructor, who then corrects as if the agent had done it. An agent reaches this state only by its
+        own mistakes, and in correction episodes the recovery from it (let go, move off, go to the goal
+        beside what was just moved) is where corrections are lost; a mistake start shows it in any stage."""
+        assert self._scene is not None
+        wrong = int(rng.choice([k for k in range(self.n_objects) if k != self._scene.goal_index]))
+        half_extents = np.array([SIM_SHAPES[obj.shape].half_extents for obj in self._scene.objects])
+        memory = OracleMemory()
+        for _ in range(MISTAKE_STEPS):
+            positions = self.objects.states().positions
+            view = ArmView(self.robot.state().ee_position, positions, half_extents, wrong, MAX_STEP)
+            self.robot.apply_action(self.task.oracle(view, memory))
+            self.world.step()
+            if self._evaluate()[wrong]:
+                return
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         if self._scene is None:

@@ -74,6 +74,13 @@ class EnvSettings:
             "centre (grasp and lift; for training, like random_start, which it adds to: the two sum to at most 1)."
         ),
     )
+    mistake_start: float = field(
+        default=0.0,
+        metadata=_help(
+            "Share of episodes that start after the scripted oracle has done the task on a random wrong object "
+            "(for training): the state in which the instructor corrects, drawn on top of the arm's start."
+        ),
+    )
 
     def __post_init__(self) -> None:
         if isinstance(self.objects, bool) or self.objects not in (2, 3):
@@ -86,6 +93,8 @@ class EnvSettings:
             raise ValueError(f"max_episode_steps must be positive, got {self.max_episode_steps}")
         if not 0.0 <= self.random_start <= 1.0:
             raise ValueError(f"random_start must be a probability within [0, 1], got {self.random_start}")
+        if not 0.0 <= self.mistake_start <= 1.0:
+            raise ValueError(f"mistake_start must be a probability within [0, 1], got {self.mistake_start}")
         if not 0.0 <= self.object_start <= 1.0 - self.random_start:
             raise ValueError(
                 f"object_start must be within [0, 1 - random_start] = [0, {1.0 - self.random_start:g}] (the two "
@@ -114,11 +123,11 @@ class EnvSettings:
         return CORRECTION_LIMIT if self.correction_rate > 0 else PLAIN_LIMIT
 
     def for_evaluation(self, correction_rate: float | None = None) -> EnvSettings:
-        """These settings as evaluation uses them: every episode starts from the neutral pose (random and
-        object starts are for training), so success is comparable across runs and curricula.
+        """These settings as evaluation uses them: every episode starts from the neutral pose (random, object
+        and mistake starts are for training), so success is comparable across runs and curricula.
         ``correction_rate``, where given, replaces a non-zero share of correction episodes; settings without
         corrections keep none, since their episodes are not built to hold one."""
-        changes: dict[str, Any] = {"random_start": 0.0, "object_start": 0.0}
+        changes: dict[str, Any] = {"random_start": 0.0, "object_start": 0.0, "mistake_start": 0.0}
         if correction_rate is not None and self.correction_rate > 0:
             changes["correction_rate"] = correction_rate
         return dataclasses.replace(self, **changes)

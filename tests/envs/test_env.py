@@ -189,6 +189,7 @@ def test_two_environments_do_not_interfere() -> None:
         ({"max_delay": -2}, "max_delay"),
         ({"kinds": ["gossip"]}, "kinds"),
         ({"random_start": -0.1}, "random_start"),
+        ({"mistake_start": 1.2}, "mistake_start"),
     ],
 )
 def test_bad_settings_raise_clear_errors(kwargs: dict, setting: str) -> None:
@@ -293,6 +294,32 @@ def test_from_an_object_start_closing_and_raising_the_hand_grasps() -> None:
             _, _, _, _, info = env.step(np.array([0.0, 0.0, 1.0, -1.0]))
         assert info["achieved"].any(), f"seed {seed}: closing and raising the hand held nothing"
     env.close()
+
+
+@pytest.mark.parametrize("task", ["reach", "push", "grasp", "lift"])
+def test_a_mistake_start_begins_with_the_task_done_on_a_wrong_object_and_the_instructor_corrects_it(task: str) -> None:
+    env = LanroEnv(task, objects=3, mode="colour_shape", correction_rate=1.0, mistake_start=1.0)
+    corrected_at = []
+    for seed in range(12):
+        obs, info = env.reset(seed=seed)
+        wrong = [k for k in np.flatnonzero(info["achieved"]) if k != info["goal_index"]]
+        assert len(wrong) == 1 and not info["is_success"], f"seed {seed}: achieved {info['achieved']}"
+        assert info["correction"] is None and info["instruction_text"] == env.instructor.instruction_text
+        _, _, _, _, info = env.step(np.append(np.zeros(3), [-1.0] * (env.action_space.shape[0] - 3)))
+        corrected_at.append(None if info["correction"] is None else info["correction"]["spoken_at"])
+    assert corrected_at.count(1) >= 10  # max_delay 0: spoken at the first step, on the object the start acted on
+    env.close()
+
+
+def test_a_mistake_start_share_is_respected_and_zero_changes_nothing() -> None:
+    half = LanroEnv("push", mistake_start=0.5)
+    mistakes = [bool(half.reset(seed=s)[1]["achieved"].any()) for s in range(40)]
+    assert 10 <= sum(mistakes) <= 30
+    plain, zero = LanroEnv("push", correction_rate=0.5), LanroEnv("push", correction_rate=0.5, mistake_start=0.0)
+    for seed in range(3):
+        np.testing.assert_array_equal(plain.reset(seed=seed)[0]["observation"], zero.reset(seed=seed)[0]["observation"])
+    for env in (half, plain, zero):
+        env.close()
 
 
 def test_start_shares_split_the_episodes_and_need_a_gripper() -> None:
