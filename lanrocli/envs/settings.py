@@ -78,7 +78,8 @@ class EnvSettings:
         default=0.0,
         metadata=_help(
             "Share of episodes that start after the scripted oracle has done the task on a random wrong object "
-            "(for training): the state in which the instructor corrects, drawn on top of the arm's start."
+            "(for training, or with lanro eval as a probe of the recovery): the state in which the instructor "
+            "corrects, drawn on top of the arm's start."
         ),
     )
 
