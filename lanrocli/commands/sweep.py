@@ -57,15 +57,19 @@ def sweep_command(
         ),
     ] = None,
     cpus_per_trial: Annotated[
-        float | None,
-        typer.Option(min=0.01, help="CPUs per trial (default: one per environment worker, and one for the learner)."),
-    ] = None,
+        float,
+        typer.Option(
+            min=0.01,
+            help="CPUs per trial: one for its learner's thread, whose environment workers mostly wait for it "
+            "(benchmarks/side_by_side.py measures how many trainings a machine holds).",
+        ),
+    ] = 1.0,
     gpus_per_trial: Annotated[
         float, typer.Option(min=0, help="GPUs per trial; above 0 the trials train on cuda.")
     ] = 0.0,
     max_concurrent: Annotated[
         int | None,
-        typer.Option(min=1, help="Trials at once (default: as many as the CPUs allow, 1 on two cores)."),
+        typer.Option(min=1, help="Trials at once (default: as many as the CPUs allow, 2 on two cores)."),
     ] = None,
 ) -> None:
     """Run a curriculum over seeds, settings and grids of settings on Ray: one ordinary run folder per trial."""

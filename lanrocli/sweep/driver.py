@@ -22,7 +22,7 @@ from lanrocli.train.curriculum import Curriculum
 def run_trials(
     out: Path,
     trials: list[tuple[Trial, Curriculum]],
-    cpus_per_trial: float | None,
+    cpus_per_trial: float,
     gpus_per_trial: float,
     max_concurrent: int | None,
     address: str | None,
@@ -34,8 +34,7 @@ def run_trials(
     jobs = trial_jobs(out, trials, "cuda" if gpus_per_trial > 0 else "cpu")
     waiting = {job.name for job in jobs}
     rows = [TrialProgress(trial.name, PENDING if trial.name in waiting else ENDED_BEFORE) for trial, _ in trials]
-    envs = max(plan.envs for _, plan in trials)
-    resources = Resources.choose(envs, cpus_per_trial, gpus_per_trial, max_concurrent, address)
+    resources = Resources.choose(cpus_per_trial, gpus_per_trial, max_concurrent, address)
     display = SweepDisplay.for_terminal(rows)
     outcome = SweepOutcome()
     if jobs:

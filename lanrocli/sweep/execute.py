@@ -65,18 +65,15 @@ class Resources:
 
     @classmethod
     def choose(
-        cls, envs: int, cpus_per_trial: float | None, gpus_per_trial: float, max_concurrent: int | None, address: str | None
+        cls, cpus_per_trial: float, gpus_per_trial: float, max_concurrent: int | None, address: str | None
     ) -> Resources:
-        """The command line's choices, with defaults: a trial takes a CPU for each environment worker (a
-        single environment runs in the trial's own process) and one for its learner; on this machine as
-        many trials run at once as its CPUs hold (at least one, which gets what it asks for), on a cluster
-        as many as the cluster's resources allow."""
-        cpus = cpus_per_trial or float(envs + 1 if envs > 1 else 1)
+        """The command line's choices: on this machine as many trials run at once as its CPUs hold (at least
+        one, which gets what it asks for), on a cluster as many as the cluster's resources allow."""
         if address is not None:
-            return cls(cpus, gpus_per_trial, max_concurrent, address)
+            return cls(cpus_per_trial, gpus_per_trial, max_concurrent, address)
         machine = len(os.sched_getaffinity(0))
-        concurrent = max_concurrent or max(1, int(machine // cpus))
-        return cls(cpus, gpus_per_trial, concurrent, None, max(float(machine), cpus * concurrent))
+        concurrent = max_concurrent or max(1, int(machine // cpus_per_trial))
+        return cls(cpus_per_trial, gpus_per_trial, concurrent, None, max(float(machine), cpus_per_trial * concurrent))
 
     def __str__(self) -> str:
         where = f"the Ray cluster at {self.address}" if self.address else f"a local Ray instance ({self.cpus:g} CPUs)"

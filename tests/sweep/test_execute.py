@@ -8,16 +8,15 @@ from lanrocli.sweep.execute import Resources, _summary
 from lanrocli.train.errors import RunError
 
 
-def test_a_trial_takes_a_cpu_per_environment_worker_and_one_for_its_learner() -> None:
+def test_a_trial_takes_the_cpus_asked_and_as_many_run_at_once_as_the_machine_holds() -> None:
     cores = len(os.sched_getaffinity(0))
-    two = Resources.choose(envs=2, cpus_per_trial=None, gpus_per_trial=0, max_concurrent=None, address=None)
-    assert two.cpus_per_trial == 3 and two.max_concurrent == max(1, cores // 3)
-    assert two.cpus == max(cores, 3 * two.max_concurrent)  # one trial always fits, even on two cores
-    one = Resources.choose(envs=1, cpus_per_trial=None, gpus_per_trial=0, max_concurrent=None, address=None)
-    assert one.cpus_per_trial == 1 and one.max_concurrent == cores
-    asked = Resources.choose(envs=2, cpus_per_trial=1, gpus_per_trial=0.5, max_concurrent=4, address=None)
+    default = Resources.choose(cpus_per_trial=1.0, gpus_per_trial=0, max_concurrent=None, address=None)
+    assert default.cpus_per_trial == 1 and default.max_concurrent == cores and default.cpus == cores
+    wide = Resources.choose(cpus_per_trial=cores + 1, gpus_per_trial=0, max_concurrent=None, address=None)
+    assert wide.max_concurrent == 1 and wide.cpus == cores + 1  # one trial always fits, whatever it asks
+    asked = Resources.choose(cpus_per_trial=1, gpus_per_trial=0.5, max_concurrent=4, address=None)
     assert (asked.cpus_per_trial, asked.gpus_per_trial, asked.max_concurrent, asked.cpus) == (1, 0.5, 4, max(cores, 4))
-    cluster = Resources.choose(envs=2, cpus_per_trial=None, gpus_per_trial=0, max_concurrent=None, address="auto")
+    cluster = Resources.choose(cpus_per_trial=3, gpus_per_trial=0, max_concurrent=None, address="auto")
     assert cluster.max_concurrent is None and cluster.cpus is None
     assert str(cluster) == "the Ray cluster at auto, 3 CPU(s) each"
 
