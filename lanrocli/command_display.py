@@ -163,6 +163,10 @@ def print_plan(plan: Curriculum) -> None:
         f"evaluation: {plan.eval.described()} every {plan.eval.every:,} steps of a stage, and at its end; "
         f"test: {plan.test.episodes} held-out episodes for each stage's last and best agents"
     )
+    for i, stage in enumerate(plan.stages):
+        if plan.evaluation(i) != plan.eval:
+            own = plan.evaluation(i)
+            console.print(f"  stage {i + 1} ({stage.name}) instead: {own.described()} every {own.every:,} steps")
     for name, section in (("agent", plan.agent), ("buffer", plan.buffer)):
         settings = section.settings()
         default = type(settings)()

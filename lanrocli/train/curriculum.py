@@ -188,6 +188,10 @@ class Curriculum(BaseModel):
     def total_steps(self) -> int:
         return sum(stage.budget.steps for stage in self.stages)
 
+    def evaluation(self, index: int) -> EvalConfig:
+        """How stage ``index`` is evaluated: the curriculum's ``eval``, with the stage's own keys in place."""
+        return self.stages[index].eval.over(self.eval)
+
     def to_yaml(self) -> str:
         """The resolved plan (``extends`` applied, defaults filled in), itself a loadable curriculum."""
         return yaml.safe_dump(self.model_dump(mode="json"), sort_keys=False)
@@ -199,6 +203,8 @@ class Curriculum(BaseModel):
         data["name"] += "-quick"
         for stage in data["stages"]:
             stage["budget"]["steps"] = min(stage["budget"]["steps"], 1500)
+            for key, most in (("every", 500), ("episodes", 5)):
+                stage["eval"][key] = stage["eval"][key] and min(stage["eval"][key], most)
         data["eval"]["every"] = min(data["eval"]["every"], 500)
         data["eval"]["episodes"] = min(data["eval"]["episodes"], 5)
         data["test"]["episodes"] = min(data["test"]["episodes"], QUICK_TEST_EPISODES)

@@ -169,11 +169,11 @@ class CurriculumRun:
         """Train until the curriculum is done (True) or ``should_stop`` asks to stop (False, after writing a
         checkpoint to resume from)."""
         stages = self.curriculum.stages
-        every = self.curriculum.eval.every
         try:
             self.complete_tests(should_stop)
             while not self.state.finished:
                 stage = stages[self.state.stage]
+                every = self.curriculum.evaluation(self.state.stage).every
                 start = self.state.stage_start
                 if self.state.evaluations == 0 and self.trainer.progress.env_steps == start:
                     self.observer.on_stage_start(self, stage)
@@ -267,7 +267,8 @@ class CurriculumRun:
                 self._test(result, should_stop)
 
     def _enter(self, index: int) -> None:
-        self.trainer.enter_stage(self.curriculum.stages[index].env.settings(), index)
+        evaluation = self.curriculum.evaluation(index)
+        self.trainer.enter_stage(self.curriculum.stages[index].env.settings(), index, evaluation.episodes, evaluation.correction_rate)
 
     def _row(self, stage: Stage, report: EvaluationReport, value: float | None, holds: bool) -> dict[str, Any]:
         progress = self.trainer.progress
@@ -335,8 +336,8 @@ def _train_settings(curriculum: Curriculum) -> TrainSettings:
         env=curriculum.stages[0].env.settings(),
         seed=curriculum.seed,
         envs=curriculum.envs,
-        eval_episodes=curriculum.eval.episodes,
-        eval_correction_rate=curriculum.eval.correction_rate,
+        eval_episodes=curriculum.evaluation(0).episodes,
+        eval_correction_rate=curriculum.evaluation(0).correction_rate,
         learning_starts=curriculum.learning_starts,
         updates_per_step=curriculum.updates_per_step,
         buffer=curriculum.buffer.settings(),

@@ -61,6 +61,10 @@ def _stage_lines(curriculum: Curriculum, state: RunState) -> list[str]:
         if stage.promote:
             p = stage.promote
             rule = f"{p.on} {'>=' if p.statistic == 'mean' else 'lower bound >='} {p.success:g}, {p.patience} pooled"
+        own = curriculum.evaluation(result.index)
+        if own != curriculum.eval:
+            judged = f"evaluation on {own.described()} every {own.every:,} steps"
+            rule = judged if rule == "-" else f"{rule}; {judged}"
         lines.append(
             f"| {result.index + 1}. {result.name} | {rule} | {result.end - result.start:,} of "
             f"{stage.budget.steps:,} | {result.ended} | {result.evaluations} | {_percent(result.rule_value)} | "

@@ -98,29 +98,6 @@ class Promote(BaseModel):
         return on
 
 
-class Stage(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-
-    name: str = Field(pattern=NAME_PATTERN)
-    env: EnvConfig = Field(default_factory=EnvConfig)
-    budget: Budget
-    promote: Promote | None = None
-    """``None``: the stage runs its whole budget."""
-    on_budget: Literal["advance", "stop"] = "advance"
-    """What to do when the budget runs out before promotion: go on regardless, or end the curriculum."""
-
-    @field_validator("promote")
-    @classmethod
-    def _corrections_exist(cls, promote: Promote | None, info: ValidationInfo) -> Promote | None:
-        env = info.data.get("env")  # absent when the env itself failed validation
-        if promote is not None and promote.on == "corrected" and env is not None and env.correction_rate == 0:
-            raise ValueError(
-                "promote on 'corrected' needs env.correction_rate > 0: without corrections there is no "
-                "success rate on corrections to measure"
-            )
-        return promote
-
-
 class EvalConfig(BaseModel):
     """Evaluations during a stage: they drive promotion and pick ``best``, each on fresh episodes."""
 
@@ -140,6 +117,49 @@ class EvalConfig(BaseModel):
         share = self.correction_rate
         where = "" if share is None else f" ({share:.0%} of them correction episodes where a stage speaks corrections)"
         return f"{self.episodes} fresh episodes{where}"
+
+
+class StageEval(BaseModel):
+    """A stage's evaluations where they differ from the curriculum's: each key given replaces the
+    curriculum's for this stage alone; an absent or null key keeps it (to judge a stage on its own share of
+    correction episodes under a curriculum-wide ``correction_rate``, give that share). So a late stage can be judged
+    differently (every evaluation a correction episode, say) and screened with ``--from`` without
+    training the earlier stages again, which a change to the curriculum's ``eval`` would alter."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    every: int | None = Field(None, gt=0)
+    episodes: int | None = Field(None, gt=0)
+    correction_rate: float | None = Field(None, gt=0.0, le=1.0)
+
+    def over(self, base: EvalConfig) -> EvalConfig:
+        """``base`` with this stage's keys in place of its own."""
+        return base.model_copy(update={key: value for key, value in self.model_dump().items() if value is not None})
+
+
+class Stage(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(pattern=NAME_PATTERN)
+    env: EnvConfig = Field(default_factory=EnvConfig)
+    budget: Budget
+    promote: Promote | None = None
+    """``None``: the stage runs its whole budget."""
+    on_budget: Literal["advance", "stop"] = "advance"
+    """What to do when the budget runs out before promotion: go on regardless, or end the curriculum."""
+    eval: StageEval = Field(default_factory=StageEval)
+    """This stage's own evaluation settings, where they differ from the curriculum's ``eval``."""
+
+    @field_validator("promote")
+    @classmethod
+    def _corrections_exist(cls, promote: Promote | None, info: ValidationInfo) -> Promote | None:
+        env = info.data.get("env")  # absent when the env itself failed validation
+        if promote is not None and promote.on == "corrected" and env is not None and env.correction_rate == 0:
+            raise ValueError(
+                "promote on 'corrected' needs env.correction_rate > 0: without corrections there is no "
+                "success rate on corrections to measure"
+            )
+        return promote
 
 
 class HeldOutConfig(BaseModel):

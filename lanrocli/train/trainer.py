@@ -218,15 +218,15 @@ class Trainer:
             LanroEnv, s.task, env, object_slots=s.slots, vocabulary=self.vocabulary, holdout=s.holdout
         )
 
-    def enter_stage(self, env: EnvSettings, stage: int) -> None:
-        """Collect and evaluate with new environment settings from now on.
-
-        The old stage's unfinished episodes are dropped: they were collected under a goal distribution
-        that no longer holds, and half an episode gives relabelling no future to look at.
-        """
+    def enter_stage(self, env: EnvSettings, stage: int, eval_episodes: int, eval_correction_rate: float | None) -> None:
+        """Collect and evaluate with new environment and evaluation settings from now on. The old stage's
+        unfinished episodes are dropped: they were collected under a goal distribution that no longer holds,
+        and half an episode gives relabelling no future to look at."""
         self.close()
         self._restore = None
-        self.settings = dataclasses.replace(self.settings, env=env, stage=stage)
+        self.settings = dataclasses.replace(
+            self.settings, env=env, stage=stage, eval_episodes=eval_episodes, eval_correction_rate=eval_correction_rate
+        )
         self.buffer.negations = env.negations or self.settings.buffer.relabel_negations
 
     # -- running -----------------------------------------------------------------------------------------

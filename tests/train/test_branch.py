@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from lanrocli.train.branch import branch
+from lanrocli.train.branch import branch, branch_point
 from lanrocli.train.curriculum import load_curriculum
 from lanrocli.train.errors import RunError
 from lanrocli.train.pipeline import CurriculumRun
@@ -54,6 +54,11 @@ def test_a_variant_that_does_not_only_change_later_stages_is_refused(
     with pytest.raises(RunError, match=message):
         branch(load_curriculum(path), source, tmp_path / "new")
     assert not (tmp_path / "new").exists()
+
+
+def test_a_variant_that_judges_its_last_stage_otherwise_branches_there(tmp_path: Path) -> None:
+    path = variant(tiny(tmp_path), tmp_path, THIRD, THIRD + "\n    eval: {correction_rate: 1}")
+    assert branch_point(load_curriculum(tiny(tmp_path)), load_curriculum(path)) == 2
 
 
 def test_the_same_curriculum_has_nothing_to_branch_into(tmp_path: Path) -> None:

@@ -191,6 +191,20 @@ def test_evaluation_correction_share_is_a_probability_above_zero(tmp_path: Path)
     assert (problem.line, problem.path) == (1, "eval.correction_rate") and "greater than 0" in problem.message
 
 
+def test_a_stage_evaluation_replaces_the_curriculums_keys_it_gives_for_that_stage_alone(tmp_path: Path) -> None:
+    text = "eval: {every: 500, episodes: 40}\n" + MINIMAL + (
+        "  - name: second\n    budget: {steps: 1000}\n    eval: {episodes: 80, correction_rate: 1, every: null}\n"
+    )
+    curriculum = load_curriculum(write(tmp_path, "c.yaml", text))
+    assert curriculum.evaluation(0) == curriculum.eval
+    assert (curriculum.evaluation(1).every, curriculum.evaluation(1).episodes) == (500, 80)
+    assert curriculum.evaluation(1).correction_rate == 1.0 and curriculum.eval.correction_rate is None
+    assert load_curriculum(write(tmp_path, "d.yaml", curriculum.to_yaml())) == curriculum  # config.yaml round trip
+    assert curriculum.quick().evaluation(1).episodes == 5
+    problem = only_problem(write(tmp_path, "e.yaml", text.replace("correction_rate: 1", "correction_rate: 2")))
+    assert (problem.line, problem.path) == (9, "stages[1].eval.correction_rate") and "less than or equal" in problem.message
+
+
 def test_common_ground_needs_rare_words(tmp_path: Path) -> None:
     text = MINIMAL + "    env: {correction_rate: 0.5, kinds: [common_ground]}\n"
     problem = only_problem(write(tmp_path, "c.yaml", text))

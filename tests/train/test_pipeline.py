@@ -141,6 +141,23 @@ def test_the_evaluation_correction_share_reaches_the_trainer_and_the_report(tmp_
     run.close()
 
 
+def test_a_stage_with_its_own_evaluation_is_evaluated_so_from_its_first_step(tmp_path: Path) -> None:
+    data = load_curriculum(tiny(tmp_path)).model_dump()
+    data["stages"][1]["eval"] = {"every": 20, "episodes": 3, "correction_rate": 1.0}
+    data["test"]["episodes"] = 1
+    curriculum = Curriculum.model_validate(data)
+    run = CurriculumRun.start(curriculum, tmp_path / "run")
+    assert run.trainer.settings.eval_episodes == 2 and run.trainer.settings.eval_correction_rate is None
+    run.run(should_stop=lambda: run.trainer.progress.env_steps > 80)  # in the second stage, after its entry
+    assert (run.trainer.settings.eval_episodes, run.trainer.settings.eval_correction_rate) == (3, 1.0)
+    run.run(should_stop=lambda: run.trainer.progress.env_steps > 160)
+    assert (run.trainer.settings.eval_episodes, run.trainer.settings.eval_correction_rate) == (2, None)
+    run.close()
+    evaluations = [(r["stage"], r["stage_steps"], r["episodes"]) for r in rows(tmp_path / "run")]
+    assert evaluations == [("1", "40", "2"), ("1", "80", "2")] + [("2", str(s), "3") for s in (20, 40, 60, 80)]
+    assert "evaluation on 3 fresh episodes (100% of them" in render_report(curriculum, run.state, tmp_path / "run")
+
+
 def test_on_budget_stop_ends_the_run_and_the_report_says_so(tmp_path: Path) -> None:
     data = load_curriculum(tiny(tmp_path)).model_dump()
     data["stages"][0]["on_budget"] = "stop"

@@ -152,7 +152,7 @@ def test_entering_a_stage_changes_the_environments_and_keeps_the_learning() -> N
     trainer = Trainer(settings, AGENT)
     trainer.run(60)
     updates, stored = trainer.progress.updates, trainer.buffer.size
-    trainer.enter_stage(EnvSettings(objects=3, correction_rate=0.5, negations=True), stage=1)
+    trainer.enter_stage(EnvSettings(objects=3, correction_rate=0.5, negations=True), 1, 4, None)
     trainer.run(200)
     trainer.close()
     assert trainer.progress.updates > updates and trainer.buffer.size > stored and trainer.buffer.negations
