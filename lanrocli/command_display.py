@@ -164,8 +164,7 @@ def print_plan(plan: Curriculum) -> None:
         f"test: {plan.test.episodes} held-out episodes for each stage's last and best agents"
     )
     for i, stage in enumerate(plan.stages):
-        if plan.evaluation(i) != plan.eval:
-            own = plan.evaluation(i)
+        if (own := plan.evaluation(i)) != plan.eval:
             console.print(f"  stage {i + 1} ({stage.name}) instead: {own.described()} every {own.every:,} steps")
     for name, section in (("agent", plan.agent), ("buffer", plan.buffer)):
         settings = section.settings()
