@@ -82,6 +82,14 @@ class EnvSettings:
             "corrects, drawn on top of the arm's start."
         ),
     )
+    scripted_recovery: float = field(
+        default=0.0,
+        metadata=_help(
+            "Share of correction episodes that the scripted policy acts in place of the agent (for training; "
+            "evaluation never lets it act): it does the task on a wrong object, is corrected, and does it on "
+            "the goal, a recovery stored in the replay buffer for the agent to learn from off-policy."
+        ),
+    )
 
     def __post_init__(self) -> None:
         if isinstance(self.objects, bool) or self.objects not in (2, 3):
@@ -96,6 +104,8 @@ class EnvSettings:
             raise ValueError(f"random_start must be a probability within [0, 1], got {self.random_start}")
         if not 0.0 <= self.mistake_start <= 1.0:
             raise ValueError(f"mistake_start must be a probability within [0, 1], got {self.mistake_start}")
+        if not 0.0 <= self.scripted_recovery <= 1.0:
+            raise ValueError(f"scripted_recovery must be a probability within [0, 1], got {self.scripted_recovery}")
         if not 0.0 <= self.object_start <= 1.0 - self.random_start:
             raise ValueError(
                 f"object_start must be within [0, 1 - random_start] = [0, {1.0 - self.random_start:g}] (the two "
@@ -124,11 +134,13 @@ class EnvSettings:
         return CORRECTION_LIMIT if self.correction_rate > 0 else PLAIN_LIMIT
 
     def for_evaluation(self, correction_rate: float | None = None) -> EnvSettings:
-        """These settings as evaluation uses them: every episode starts from the neutral pose (random, object
-        and mistake starts are for training), so success is comparable across runs and curricula.
+        """These settings as evaluation uses them: every episode starts from the neutral pose and the agent
+        acts in all of them (random, object and mistake starts and scripted recoveries are for training), so
+        success is comparable across runs and curricula.
         ``correction_rate``, where given, replaces a non-zero share of correction episodes; settings without
         corrections keep none, since their episodes are not built to hold one."""
-        changes: dict[str, Any] = {"random_start": 0.0, "object_start": 0.0, "mistake_start": 0.0}
+        training_only = ("random_start", "object_start", "mistake_start", "scripted_recovery")
+        changes: dict[str, Any] = dict.fromkeys(training_only, 0.0)
         if correction_rate is not None and self.correction_rate > 0:
             changes["correction_rate"] = correction_rate
         return dataclasses.replace(self, **changes)

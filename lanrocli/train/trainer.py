@@ -259,8 +259,9 @@ class Trainer:
                 self.buffer.add_episode(episode.data)
                 self.agent.update_normalizer(episode.data.observations)
                 self.progress.episodes += 1
-                self.progress.train_successes.append(episode.success)
-                del self.progress.train_successes[:-SUCCESS_WINDOW]
+                if not episode.scripted:
+                    self.progress.train_successes.append(episode.success)
+                    del self.progress.train_successes[:-SUCCESS_WINDOW]
             self.progress.env_steps += s.envs
             self.clock.collection_s += time.perf_counter() - step_started
             if on_step is not None:

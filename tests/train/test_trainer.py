@@ -110,6 +110,7 @@ def test_sentences_have_room_for_the_longest_chain_of_corrections_from_the_first
 LEVERS = (
     dataclasses.replace(
         SETTINGS,
+        env=dataclasses.replace(SETTINGS.env, scripted_recovery=0.5),
         buffer=BufferSettings(size=5000, relabel_negations=True, fresh_targets=True, ground_real=True, falls_fail=True),
     ),
     SACSettings(batch_size=32, architecture="objects", sentence_in_trunk=False, see_rest=True),

@@ -1,0 +1,65 @@
+"""Collection: the scripted recoveries a share of correction episodes is acted by."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lanrocli.agent.settings import SACSettings
+from lanrocli.envs.env import LanroEnv
+from lanrocli.envs.settings import EnvSettings
+from lanrocli.train.collect import Collector, FinishedEpisode, TrainingEnv
+from lanrocli.train.trainer import Trainer, TrainSettings
+
+
+def collect(settings: EnvSettings, episodes: int, seed: int = 0) -> list[FinishedEpisode]:
+    """Whole episodes from one environment, the agent's actions all zeros."""
+    collector = Collector(lambda: LanroEnv("reach", settings=settings), 1, "reach", seed)
+    finished: list[FinishedEpisode] = []
+    try:
+        while len(finished) < episodes:
+            collector.step_async(np.zeros((1, 3), dtype=np.float32))
+            finished += collector.step_wait()
+    finally:
+        collector.close()
+    return finished
+
+
+def test_scripted_recoveries_store_the_scripted_actions_and_follow_the_correction() -> None:
+    episodes = collect(EnvSettings(objects=2, correction_rate=1.0, scripted_recovery=1.0), 4)
+    assert all(e.scripted for e in episodes)
+    for episode in episodes:
+        data = episode.data
+        # The arm moved by the script, not by the zeros sent, and what is stored is what it was given.
+        assert np.abs(data.actions).max() > 0.1
+        # The script acts on a wrong object first: the instructor corrects it, extending the sentence.
+        assert (data.next_instructions != data.instructions).any(axis=1).sum() == 1
+    assert sum(e.success for e in episodes) >= 3
+
+
+def test_without_scripted_recoveries_the_agents_actions_are_stored() -> None:
+    episodes = collect(EnvSettings(objects=2, correction_rate=1.0, max_episode_steps=5), 3)
+    assert not any(e.scripted for e in episodes)
+    assert all(np.array_equal(e.data.actions, np.zeros_like(e.data.actions)) for e in episodes)
+
+
+def test_scripted_recoveries_are_drawn_among_correction_episodes_at_their_share() -> None:
+    env = TrainingEnv(LanroEnv("reach", settings=EnvSettings(objects=2, correction_rate=0.5, scripted_recovery=0.5)))
+    drawn = []
+    for seed in range(300):
+        _, info = env.reset(seed=seed)
+        drawn.append((info["correction_episode"], info["scripted"]))
+    env.close()
+    assert not any(scripted for correction, scripted in drawn if not correction)
+    among = [scripted for correction, scripted in drawn if correction]
+    assert 0.4 < np.mean(among) < 0.6 and len(among) > 100
+
+
+def test_scripted_episodes_are_learned_from_but_not_the_agents_training_success() -> None:
+    env = EnvSettings(objects=2, correction_rate=1.0, scripted_recovery=1.0, max_episode_steps=20)
+    trainer = Trainer(TrainSettings(task="reach", env=env, learning_starts=10**6), SACSettings(batch_size=32))
+    trainer.run(100)
+    assert trainer._collector is not None
+    unfinished = trainer._collector.partials()[0]["actions"].shape[0]
+    trainer.close()
+    assert trainer.progress.episodes >= 5 and trainer.buffer.size + unfinished == 100
+    assert trainer.train_success is None
