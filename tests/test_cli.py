@@ -185,6 +185,10 @@ def test_eval_table_and_bad_values() -> None:
     assert bad.exit_code == 2 and "scripted policies read no sentence" in bad.output
     bad = runner.invoke(app, ["eval", "oracle", "--task", "push", "--object-start", "0.5"])
     assert bad.exit_code == 2 and "object_start is 0.5, but it needs a task with a gripper" in bad.output
+    # Only training's collection lets the scripted policy act; eval and play have no such option.
+    for command in (["eval", "oracle"], ["play", "push"]):
+        bad = runner.invoke(app, [*command, "--scripted-recovery", "0.5"])
+        assert bad.exit_code == 2 and "--scripted-recovery" in bad.output
 
 
 def test_eval_writes_a_gif(tmp_path) -> None:
