@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from lanrocli.agent.settings import SACSettings
 from lanrocli.envs.env import LanroEnv
@@ -11,21 +12,22 @@ from lanrocli.train.collect import Collector, FinishedEpisode, TrainingEnv
 from lanrocli.train.trainer import Trainer, TrainSettings
 
 
-def collect(settings: EnvSettings, episodes: int, seed: int = 0) -> list[FinishedEpisode]:
-    """Whole episodes from one environment, the agent's actions all zeros."""
-    collector = Collector(lambda: LanroEnv("reach", settings=settings), 1, "reach", seed)
+def collect(settings: EnvSettings, episodes: int, envs: int = 1) -> list[FinishedEpisode]:
+    """Whole episodes from ``envs`` environments (several run in subprocesses), the agent's actions all zeros."""
+    collector = Collector(lambda: LanroEnv("reach", settings=settings), envs, "reach", seed=0)
     finished: list[FinishedEpisode] = []
     try:
         while len(finished) < episodes:
-            collector.step_async(np.zeros((1, 3), dtype=np.float32))
+            collector.step_async(np.zeros((envs, 3), dtype=np.float32))
             finished += collector.step_wait()
     finally:
         collector.close()
     return finished
 
 
-def test_scripted_recoveries_store_the_scripted_actions_and_follow_the_correction() -> None:
-    episodes = collect(EnvSettings(objects=2, correction_rate=1.0, scripted_recovery=1.0), 4)
+@pytest.mark.parametrize("envs", [1, 2])
+def test_scripted_recoveries_store_the_scripted_actions_and_follow_the_correction(envs: int) -> None:
+    episodes = collect(EnvSettings(objects=2, correction_rate=1.0, scripted_recovery=1.0), 4, envs)
     assert all(e.scripted for e in episodes)
     for episode in episodes:
         data = episode.data
