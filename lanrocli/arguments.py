@@ -61,8 +61,8 @@ def _is_list(hint: Any) -> bool:
 def with_env_options(**helps: str) -> Callable[[Callable[..., None]], Callable[..., None]]:
     """Give a command one option per ``EnvSettings`` field, from the field's type and ``help`` (or the one
     ``helps`` gives it, where the command reads the setting its own way): typer reads the signature, and the
-    command receives them in its ``**env_options``, None where not given. ``scripted_recovery`` is left out:
-    only training's collection acts on it, and these commands let the agent act in every episode."""
+    command receives them in its ``**env_options``, None where not given. A field whose metadata says
+    ``option: False`` is left out: only training's collection acts on it."""
 
     def add_options(command: Callable[..., None]) -> Callable[..., None]:
         signature = inspect.signature(command, eval_str=True)
@@ -78,7 +78,7 @@ def with_env_options(**helps: str) -> Callable[[Callable[..., None]], Callable[.
                 ],
             )
             for f in dataclasses.fields(EnvSettings)
-            if f.name != "scripted_recovery"
+            if f.metadata["option"]
         ]
         kept = [p for p in signature.parameters.values() if p.kind is not inspect.Parameter.VAR_KEYWORD]
         command.__signature__ = signature.replace(parameters=kept + options)  # type: ignore[attr-defined]

@@ -22,8 +22,10 @@ CORRECTION_LIMIT = 100
 """Steps of an episode when corrections may be spoken: the arm needs time to recover from its mistake."""
 
 
-def _help(text: str) -> dict[str, str]:
-    return {"help": text}
+def _help(text: str, option: bool = True) -> dict[str, Any]:
+    """A field's metadata: its ``help``, and whether commands that run episodes take it as an option
+    (``False`` for a setting only training's collection acts on)."""
+    return {"help": text, "option": option}
 
 
 @dataclass(frozen=True)
@@ -87,7 +89,8 @@ class EnvSettings:
         metadata=_help(
             "Share of correction episodes that the scripted policy acts in place of the agent (for training; "
             "evaluation never lets it act): it does the task on a wrong object, is corrected, and does it on "
-            "the goal, a recovery stored in the replay buffer for the agent to learn from off-policy."
+            "the goal, a recovery stored in the replay buffer for the agent to learn from off-policy.",
+            option=False,
         ),
     )
 
