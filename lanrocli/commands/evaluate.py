@@ -183,6 +183,11 @@ def evaluate_command(
         typer.echo(json.dumps(record))
         return
     print_evaluation(report, f"{what} on {task_name}, {env_summary(env_settings)}, {where}")
+    if split is not None:
+        from lanrocli.train.generalisation import control_lines
+
+        for line in control_lines(split, record):
+            Console().print(line, highlight=False, soft_wrap=True)
     if gif:
         Console().print(f"wrote {gif}")
 

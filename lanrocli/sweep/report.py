@@ -30,7 +30,7 @@ import yaml
 from lanrocli.envs.figures import FIGURE, FIGURES, JUDGED, Figure
 from lanrocli.stats import IQM_RUNS, Estimate, bootstrap, iqm, probability_of_improvement
 from lanrocli.sweep.groups import Group, group_runs
-from lanrocli.train.generalisation import SPLIT_FIGURES, SplitFigure, drop
+from lanrocli.train.generalisation import SPLIT_FIGURES, SplitFigure, drop, in_distribution
 from lanrocli.train.errors import CheckpointError
 from lanrocli.train.runfolder import CONFIG, CORRECTION_TEST, LATEST, SPLITS, STATE_FILE, TEST, read_pointer, stage_folder
 from lanrocli.train.runreport import run_ended
@@ -74,8 +74,9 @@ def _split_drop(figure: SplitFigure) -> Reported:
     def read(test: dict[str, Any], agent: str) -> tuple[int, float | None]:
         if not _has_split(test, figure, agent):
             return 0, None
-        mine = figure.read(test[SPLITS][figure.split.value][agent])
-        points = drop(mine, figure.read(test[agent]))
+        record = test[SPLITS][figure.split.value][agent]
+        mine = figure.read(record)
+        points = drop(mine, in_distribution(figure, record, test[agent])[0])
         return (0, None) if points is None or mine is None else (mine["episodes"], points / 100)
 
     return Reported(f"{figure.split.value} split: drop of {figure.label} (points)", read, False)

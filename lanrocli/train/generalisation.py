@@ -1,5 +1,11 @@
 """The generalisation splits in a run's records: which figure judges each split, and its drop from the same
-agent's in-distribution test, for ``report.md``, ``lanro eval --split`` and ``lanro report``."""
+agent's in-distribution figure, for ``report.md``, ``lanro eval --split`` and ``lanro report``.
+
+A split that changes only what a correction says or when it comes is measured twice on the same seeds: on
+its held-out episodes and on its control, the same scenes, goals and instructions with nothing held out.
+Its drop is taken from the control, so it is the held-out part's alone. Against the ordinary test it would
+also carry the difference between two samples of episodes, the test's few spoken corrections and the
+split's, which alone moves a drop by several points from seed to seed."""
 
 from __future__ import annotations
 
@@ -26,6 +32,15 @@ class SplitFigure:
         return record[self.name]
 
 
+CONTROLLED: frozenset[Split] = frozenset({Split.CORRECTION_WORDS, Split.LATE_CORRECTIONS})
+"""The splits measured against a control. The pairs split changes the goal, so no episode of it can be
+played with nothing held out: the ordinary test, built like it, is its in-distribution figure. Common
+ground is judged on its own figure."""
+
+CONTROL = "control"
+"""The key of a split record's control: the record of the same episodes with nothing held out."""
+
+
 SPLIT_FIGURES: tuple[SplitFigure, ...] = (
     SplitFigure(Split.PAIRS, "success", "success"),
     SplitFigure(Split.PAIRS, "corrected", "corrected"),
@@ -35,6 +50,16 @@ SPLIT_FIGURES: tuple[SplitFigure, ...] = (
 )
 """What each split is judged on: the pairs split changes the goal of every episode, so success and the
 corrected success; the others change what a correction episode says or when, so the corrected success."""
+
+
+def in_distribution(
+    figure: SplitFigure, split_record: dict[str, Any], test: dict[str, Any] | None
+) -> tuple[dict[str, Any] | None, str]:
+    """The figure the split is set against, and what it is: the split's control where it was measured,
+    else the agent's ordinary test record ``test`` (runs tested before controls existed)."""
+    if CONTROL in split_record:
+        return figure.read(split_record[CONTROL]), "control"
+    return (figure.read(test) if test is not None else None), "test"
 
 
 def drop(split_rate: dict[str, Any] | None, in_distribution: dict[str, Any] | None) -> float | None:
@@ -51,19 +76,36 @@ def split_lines(splits: dict[str, dict[str, dict[str, Any]]], ordinary: dict[str
         "",
         "## Generalisation splits: the final stage's agents on what training never showed",
         "",
-        "Each split's held-out episodes (docs/generalisation.md) against the same agent's test above; drop in "
-        "points, positive where the split is harder. Success with 95% Wilson interval (episodes).",
+        "Each split's held-out episodes (docs/generalisation.md) against the same agent's in-distribution "
+        "figure: for the correction words and late corrections the control (the split's own seeds with nothing "
+        "held out), for the pairs the test above. Drop in points, positive where the split is harder. Success "
+        "with 95% Wilson interval (episodes).",
         "",
-        "| split | agent | figure | split's episodes | in distribution | drop |",
-        "|---|---|---|---|---|---|",
+        "| split | agent | figure | split's episodes | in distribution | from | drop |",
+        "|---|---|---|---|---|---|---|",
     ]
     for figure in SPLIT_FIGURES:
         for agent, record in splits.get(figure.split.value, {}).items():
-            mine, theirs = figure.read(record), figure.read(ordinary[agent]) if agent in ordinary else None
+            mine = figure.read(record)
+            theirs, source = in_distribution(figure, record, ordinary.get(agent))
             points = drop(mine, theirs)
             lines.append(
                 f"| {figure.split.value} | {agent} | {figure.label} | {with_interval(mine)} | {with_interval(theirs)} | "
-                f"{'-' if points is None else f'{points:+.1f}'} |"
+                f"{source if theirs else '-'} | {'-' if points is None else f'{points:+.1f}'} |"
+            )
+    return lines
+
+
+def control_lines(split: Split, record: dict[str, Any]) -> list[str]:
+    """What ``lanro eval --split`` says under its table: each figure of the split against its control."""
+    lines = []
+    for figure in SPLIT_FIGURES:
+        if figure.split is split and CONTROL in record:
+            mine, theirs = figure.read(record), figure.read(record[CONTROL])
+            points = drop(mine, theirs)
+            lines.append(
+                f"{figure.label}: {with_interval(mine)} here, {with_interval(theirs)} on the control (the same "
+                f"episodes with nothing held out): drop {'-' if points is None else f'{points:+.1f}'} points"
             )
     return lines
 

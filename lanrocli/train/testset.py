@@ -27,6 +27,7 @@ from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.workers import make_envs
 from lanrocli.language.vocabulary import unlearned_words
 from lanrocli.train.checkpoint import resolve_checkpoint
+from lanrocli.train.generalisation import CONTROL, CONTROLLED
 from lanrocli.train.quota import CORRECTION_QUOTA, CorrectionQuota
 from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, SPLITS
 from lanrocli.train.seeds import correction_test_seed, held_out_seed, split_test_seed
@@ -225,11 +226,18 @@ def split_test(
     acting_attention: ActingAttention | None = None,
 ) -> Measurement:
     """The checkpoint at ``path`` on ``episodes`` held-out episodes of one generalisation split of its run's
-    holdout, on a seed stream of the split's own."""
+    holdout, on a seed stream of the split's own; for a split in ``CONTROLLED`` the record's ``control`` is
+    the same seeds played with nothing held out."""
     loaded = _load(path, device, split_changes(split), check, split, acting_attention)
     first = split_test_seed(loaded.settings.seed, loaded.settings.stage, split)
     report = _run(loaded, episodes, first, progress=progress)
     record = {**_record(loaded, {"split": split.value, "first_seed": first}, Instruction.TRUE, report), "split": split.value}
+    if split in CONTROLLED:
+        control = replace(loaded, split=None)
+        record[CONTROL] = _record(
+            control, {"control_of": split.value, "first_seed": first}, Instruction.TRUE,
+            _run(control, episodes, first, progress=progress),
+        )
     return Measurement(loaded.settings, loaded.env, first, True, report, record)
 
 
@@ -253,8 +261,9 @@ def measure_stage(
     on its held-out test episodes, read back from their checkpoints. The run's ``final`` stage also has its
     last agent read a blank and another object's sentence, its agents on the correction test, sized like the
     test (``CorrectionQuota.scaled``), and on each generalisation split in ``splits``, as many episodes as
-    the test. A stop request is looked at after every episode and raises :class:`TestsStopped`: the tests
-    of a last stage take minutes, longer than a cluster's scheduler waits after it asks a job to stop."""
+    the test (as many again for a split's control). A stop request is looked at after every episode and
+    raises :class:`TestsStopped`: the tests of a last stage take minutes, longer than a cluster's scheduler
+    waits after it asks a job to stop."""
 
     def progress(_: int) -> None:
         if should_stop():

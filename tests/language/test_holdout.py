@@ -106,6 +106,30 @@ def test_late_corrections_wait_longer_than_any_in_training() -> None:
     assert delays(Split.LATE_CORRECTIONS) == set(range(11, 21))
 
 
+@pytest.mark.parametrize("split", [Split.LATE_CORRECTIONS, Split.CORRECTION_WORDS])
+def test_a_splits_control_is_the_same_episode_with_nothing_held_out(split: Split) -> None:
+    """The control of a split (the split's seeds, ``split`` None) must differ from it in what the split holds
+    out alone: the same scene, goal, instruction and mistake, so the drop between them is that part's."""
+    settings = InstructorSettings(correction_rate=1.0, negations=True, max_delay=10, rare_words=True)
+    compared = 0
+    for seed in range(200):
+        (held, held_scene), (control, control_scene) = (episode(seed, s, settings) for s in (split, None))
+        assert held.instruction_text == control.instruction_text
+        assert held_scene.objects == control_scene.objects and held_scene.goal == control_scene.goal
+        if held.spoken is None or control.spoken is None:
+            assert held.spoken is control.spoken is None  # no misunderstanding and the mistake unseen
+            continue
+        compared += 1
+        assert held.spoken.triggered_at == control.spoken.triggered_at
+        delays = [s.spoken_at - s.triggered_at for s in (held.spoken, control.spoken)]
+        words = [set(s.text.split()) & set(HOLDOUT.correction_words) for s in (held.spoken, control.spoken)]
+        if split is Split.LATE_CORRECTIONS:
+            assert delays[0] >= 11 and delays[1] <= 10
+        else:
+            assert words[0] and not words[1] and delays[0] == delays[1]
+    assert compared > 150
+
+
 def test_held_out_rare_words_are_never_heard_in_training_and_always_in_the_common_ground_split() -> None:
     held = set(HOLDOUT.common_ground)
     rare_in_training = 0

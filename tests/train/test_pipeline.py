@@ -9,7 +9,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from typer.testing import CliRunner
 
+from lanrocli.cli import app
 from lanrocli.choices import CorrectionForm, Split
 from lanrocli.envs.evaluation import EvaluationReport
 from lanrocli.envs.figures import EpisodeResult, wilson_interval
@@ -17,6 +19,7 @@ from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.checkpoint import AGENT_FILE, resolve_checkpoint
 from lanrocli.train.curriculum import Curriculum, load_curriculum
 from lanrocli.train.errors import RunError
+from lanrocli.train.generalisation import CONTROL, CONTROLLED
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
 from lanrocli.train.recovery import restore_files as _restore_files
 from lanrocli.train.runfolder import (
@@ -201,9 +204,20 @@ def test_the_run_folder_has_every_file(straight: Baseline) -> None:
         for record in records.values():
             assert record["split"] == split and record["episodes"] == 2
             assert record["episodes_from"] == {"split": split, "first_seed": split_test_seed(5, 2, Split(split))}
+            # A split that changes the correction alone is also played on its seeds with nothing held out.
+            if Split(split) in CONTROLLED:
+                control = record[CONTROL]
+                assert control["episodes"] == 2 and control["env"] == record["env"]
+                assert control["episodes_from"] == {"control_of": split, "first_seed": split_test_seed(5, 2, Split(split))}
+            else:
+                assert CONTROL not in record
         assert f"| {split} | last |" in table
     assert "## Generalisation splits" in table
-    assert split_test(read_pointer(out / "stage-3-third" / "last"), Split.PAIRS, 2).record == tested[SPLITS]["pairs"]["last"]
+    last = read_pointer(out / "stage-3-third" / "last")
+    for split in (Split.PAIRS, Split.LATE_CORRECTIONS):
+        assert split_test(last, split, 2).record == tested[SPLITS][split.value]["last"]
+    said = CliRunner().invoke(app, ["eval", str(out), "--split", "late_corrections"])
+    assert said.exit_code == 0 and "on the control (the same episodes with nothing held out): drop" in said.output
 
 
 def test_the_last_stage_ends_with_a_correction_test_of_both_agents(tmp_path: Path) -> None:
