@@ -120,3 +120,29 @@ def probability_of_improvement(
     values = improvement(_resample(a, reps, rng), _resample(b, reps, rng))
     low, high = _percentiles(values, confidence)
     return Estimate(float(improvement(a[None], b[None])[0]), low, high, a.shape[0])
+
+
+def paired_rate_difference(
+    counted: np.ndarray,
+    won: np.ndarray,
+    confidence: float = CONFIDENCE,
+    reps: int = REPS,
+    seed: int = 0,
+) -> Estimate:
+    """Rate of the first way minus rate of the second, on units measured both ways (the same episodes played
+    twice), each rate over the units it counts: ``counted`` and ``won`` are booleans shaped (2, units). The
+    bootstrap draws units, not ways, so that what the two share (a scene, a goal, a mistake) cancels in
+    every resample; resamples where either way counts no unit are left out."""
+    counted, won = np.asarray(counted, dtype=bool), np.asarray(won, dtype=bool) & np.asarray(counted, dtype=bool)
+    if counted.ndim != 2 or counted.shape[0] != 2 or counted.shape != won.shape or not counted.any(axis=1).all():
+        raise ValueError(f"counted and won must be (2, units) with something counted each way, not {counted.shape}")
+    units = counted.shape[1]
+    rng, differences = np.random.default_rng(seed), []
+    for chunk in np.array_split(np.arange(reps), max(1, reps * units // 1_000_000)):
+        weights = rng.multinomial(units, np.full(units, 1 / units), size=len(chunk))
+        totals, wins = weights @ counted.T.astype(float), weights @ won.T.astype(float)
+        kept = (totals > 0).all(axis=1)
+        differences.append(wins[kept, 0] / totals[kept, 0] - wins[kept, 1] / totals[kept, 1])
+    value = won[0].sum() / counted[0].sum() - won[1].sum() / counted[1].sum()
+    low, high = _percentiles(np.concatenate(differences), confidence)
+    return Estimate(float(value), low, high, units)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lanrocli.stats import bootstrap, improvement, iqm, mean, probability_of_improvement
+from lanrocli.stats import bootstrap, improvement, iqm, mean, paired_rate_difference, probability_of_improvement
 
 MANY = 100_000
 """Resamples for the tests: the sample quantiles then sit well inside the steps of the exact distributions."""
@@ -49,3 +49,23 @@ def test_resampling_is_repeatable_and_refuses_gaps() -> None:
         bootstrap([0.5, float("nan")])
     with pytest.raises(ValueError, match="at least one run"):
         bootstrap([])
+
+
+def test_a_paired_difference_cancels_what_both_ways_share() -> None:
+    rng = np.random.default_rng(1)
+    units = 500
+    counted = np.ones((2, units), dtype=bool)
+    counted[:, rng.random(units) < 0.6] = False  # the units where neither way counts (no correction spoken)
+    shared = rng.random(units) < 0.9  # what the two ways of playing a unit share decides most outcomes
+    won = np.stack([shared & (rng.random(units) < 0.95), shared])
+    estimate = paired_rate_difference(counted, won)
+    rates = (won & counted).sum(axis=1) / counted.sum(axis=1)
+    assert estimate.value == pytest.approx(rates[0] - rates[1]) and estimate.runs == units
+    # The first way loses about 5 points; paired, the interval excludes no change, which two independent
+    # samples of this size could not show (their Wilson intervals would overlap).
+    assert estimate.low < estimate.value < estimate.high < 0
+    assert estimate.high - estimate.low < 0.07
+    same = paired_rate_difference(counted, np.stack([shared, shared]))
+    assert (same.value, same.low, same.high) == (0.0, 0.0, 0.0)
+    with pytest.raises(ValueError, match="something counted each way"):
+        paired_rate_difference(np.zeros((2, 4), dtype=bool), np.zeros((2, 4), dtype=bool))

@@ -12,7 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from lanrocli.choices import Kind, Split
+from lanrocli.envs.figures import FIGURE, EpisodeResult
+from lanrocli.stats import paired_rate_difference
 
 
 @dataclass(frozen=True)
@@ -22,6 +26,8 @@ class SplitFigure:
     split: Split
     name: str
     label: str
+    figure: str
+    """The name in ``FIGURES`` of the rate it reads: which episodes it counts."""
 
     def read(self, record: dict[str, Any]) -> dict[str, Any] | None:
         """The figure's rate (``episodes``, ``success``, ``ci``) in a test record, or None if it has none."""
@@ -40,13 +46,16 @@ ground is judged on its own figure."""
 CONTROL = "control"
 """The key of a split record's control: the record of the same episodes with nothing held out."""
 
+DROP = "drop"
+"""The key of a split record's drops from its control, by figure: points and their paired interval."""
+
 
 SPLIT_FIGURES: tuple[SplitFigure, ...] = (
-    SplitFigure(Split.PAIRS, "success", "success"),
-    SplitFigure(Split.PAIRS, "corrected", "corrected"),
-    SplitFigure(Split.CORRECTION_WORDS, "corrected", "corrected"),
-    SplitFigure(Split.LATE_CORRECTIONS, "corrected", "corrected"),
-    SplitFigure(Split.COMMON_GROUND, "common_ground", "corrected, common ground"),
+    SplitFigure(Split.PAIRS, "success", "success", "success"),
+    SplitFigure(Split.PAIRS, "corrected", "corrected", "corrected_success"),
+    SplitFigure(Split.CORRECTION_WORDS, "corrected", "corrected", "corrected_success"),
+    SplitFigure(Split.LATE_CORRECTIONS, "corrected", "corrected", "corrected_success"),
+    SplitFigure(Split.COMMON_GROUND, "common_ground", "corrected, common ground", "corrected_success_common_ground"),
 )
 """What each split is judged on: the pairs split changes the goal of every episode, so success and the
 corrected success; the others change what a correction episode says or when, so the corrected success."""
@@ -60,6 +69,26 @@ def in_distribution(
     if CONTROL in split_record:
         return figure.read(split_record[CONTROL]), "control"
     return (figure.read(test) if test is not None else None), "test"
+
+
+def paired_drops(split: Split, held: list[EpisodeResult], control: list[EpisodeResult]) -> dict[str, Any]:
+    """Each figure of ``split``: points lost from the control to the held-out episodes, episode ``i`` of each
+    played from the same seed, with a bootstrap interval that draws episodes, not ways of playing them (so
+    the scenes and mistakes the two share do not widen it). None where either counts no episode."""
+    if len(held) != len(control):
+        raise ValueError(f"a paired drop needs the same episodes both ways, not {len(held)} and {len(control)}")
+    drops: dict[str, Any] = {}
+    for figure in SPLIT_FIGURES:
+        if figure.split is split:
+            counts = FIGURE[figure.figure].counts
+            counted = np.array([[counts(r) for r in results] for results in (control, held)])
+            won = np.array([[r.success for r in results] for results in (control, held)])
+            if not counted.any(axis=1).all():
+                drops[figure.name] = None
+                continue
+            estimate = paired_rate_difference(counted, won)
+            drops[figure.name] = {"points": 100 * estimate.value, "ci": [100 * estimate.low, 100 * estimate.high]}
+    return drops
 
 
 def drop(split_rate: dict[str, Any] | None, in_distribution: dict[str, Any] | None) -> float | None:
@@ -78,8 +107,8 @@ def split_lines(splits: dict[str, dict[str, dict[str, Any]]], ordinary: dict[str
         "",
         "Each split's held-out episodes (docs/generalisation.md) against the same agent's in-distribution "
         "figure: for the correction words and late corrections the control (the split's own seeds with nothing "
-        "held out), for the pairs the test above. Drop in points, positive where the split is harder. Success "
-        "with 95% Wilson interval (episodes).",
+        "held out), for the pairs the test above. Drop in points, positive where the split is harder, with its "
+        "95% paired bootstrap interval where there is a control. Success with 95% Wilson interval (episodes).",
         "",
         "| split | agent | figure | split's episodes | in distribution | from | drop |",
         "|---|---|---|---|---|---|---|",
@@ -88,10 +117,9 @@ def split_lines(splits: dict[str, dict[str, dict[str, Any]]], ordinary: dict[str
         for agent, record in splits.get(figure.split.value, {}).items():
             mine = figure.read(record)
             theirs, source = in_distribution(figure, record, ordinary.get(agent))
-            points = drop(mine, theirs)
             lines.append(
                 f"| {figure.split.value} | {agent} | {figure.label} | {with_interval(mine)} | {with_interval(theirs)} | "
-                f"{source if theirs else '-'} | {'-' if points is None else f'{points:+.1f}'} |"
+                f"{source if theirs else '-'} | {_points(figure, record, mine, theirs)} |"
             )
     return lines
 
@@ -102,12 +130,23 @@ def control_lines(split: Split, record: dict[str, Any]) -> list[str]:
     for figure in SPLIT_FIGURES:
         if figure.split is split and CONTROL in record:
             mine, theirs = figure.read(record), figure.read(record[CONTROL])
-            points = drop(mine, theirs)
             lines.append(
                 f"{figure.label}: {with_interval(mine)} here, {with_interval(theirs)} on the control (the same "
-                f"episodes with nothing held out): drop {'-' if points is None else f'{points:+.1f}'} points"
+                f"episodes with nothing held out): drop {_points(figure, record, mine, theirs)} points"
             )
     return lines
+
+
+def _points(
+    figure: SplitFigure, record: dict[str, Any], mine: dict[str, Any] | None, theirs: dict[str, Any] | None
+) -> str:
+    """A drop as ``+2.7 [-1.9, 7.4]`` where the record holds its paired interval, else as ``+2.7``."""
+    paired = record.get(DROP, {}).get(figure.name)
+    if paired is not None:
+        low, high = paired["ci"]
+        return f"{paired['points']:+.1f} [{low:+.1f}, {high:+.1f}]"
+    points = drop(mine, theirs)
+    return "-" if points is None else f"{points:+.1f}"
 
 
 def with_interval(rate: dict[str, Any] | None) -> str:

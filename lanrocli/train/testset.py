@@ -27,7 +27,7 @@ from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.workers import make_envs
 from lanrocli.language.vocabulary import unlearned_words
 from lanrocli.train.checkpoint import resolve_checkpoint
-from lanrocli.train.generalisation import CONTROL, CONTROLLED
+from lanrocli.train.generalisation import CONTROL, CONTROLLED, DROP, paired_drops
 from lanrocli.train.quota import CORRECTION_QUOTA, CorrectionQuota
 from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, SPLITS
 from lanrocli.train.seeds import correction_test_seed, held_out_seed, split_test_seed
@@ -234,10 +234,9 @@ def split_test(
     record = {**_record(loaded, {"split": split.value, "first_seed": first}, Instruction.TRUE, report), "split": split.value}
     if split in CONTROLLED:
         control = replace(loaded, split=None)
-        record[CONTROL] = _record(
-            control, {"control_of": split.value, "first_seed": first}, Instruction.TRUE,
-            _run(control, episodes, first, progress=progress),
-        )
+        played = _run(control, episodes, first, progress=progress)
+        record[CONTROL] = _record(control, {"control_of": split.value, "first_seed": first}, Instruction.TRUE, played)
+        record[DROP] = paired_drops(split, report.results, played.results)
     return Measurement(loaded.settings, loaded.env, first, True, report, record)
 
 

@@ -4,14 +4,17 @@ from __future__ import annotations
 
 from typing import Any
 
-from lanrocli.choices import Split
+from lanrocli.choices import CorrectionForm, Kind, Split
+from lanrocli.envs.figures import EpisodeResult
 from lanrocli.train.generalisation import (
     CONTROL,
     CONTROLLED,
+    DROP,
     SPLIT_FIGURES,
     control_lines,
     drop,
     in_distribution,
+    paired_drops,
     split_lines,
 )
 
@@ -67,3 +70,29 @@ def test_lanro_eval_split_says_the_drop_from_the_control() -> None:
     [line] = control_lines(Split.LATE_CORRECTIONS, {**record(0.85), CONTROL: record(0.90)})
     assert "85.0%" in line and "90.0%" in line and "drop +5.0 points" in line
     assert control_lines(Split.PAIRS, record(0.8)) == []
+
+
+def results(outcomes: list[bool | None]) -> list[EpisodeResult]:
+    """Episodes by outcome where a correction was spoken, None where none was."""
+    form = CorrectionForm.EXCUSE
+    return [
+        EpisodeResult(bool(won), 50, Kind.AMBIGUITY, None if won is None else form, -10.0) for won in outcomes
+    ]
+
+
+def test_a_paired_drop_counts_each_way_on_its_own_corrected_episodes() -> None:
+    control = results([True] * 90 + [False] * 10 + [None] * 100)
+    held = results([True] * 80 + [False] * 10 + [None] * 110)  # ten episodes lost, and ten never corrected
+    [late] = paired_drops(Split.LATE_CORRECTIONS, held, control).items()
+    name, paired = late
+    assert name == "corrected" and round(paired["points"], 6) == round(100 * (0.9 - 80 / 90), 6)
+    low, high = paired["ci"]
+    assert low < paired["points"] < high
+    nothing = paired_drops(Split.LATE_CORRECTIONS, results([None] * 200), control)
+    assert nothing == {"corrected": None}
+
+
+def test_the_report_gives_a_paired_interval_where_there_is_one() -> None:
+    late = {**record(0.85), CONTROL: record(0.90), DROP: {"corrected": {"points": 5.0, "ci": [1.25, 8.5]}}}
+    lines = split_lines({"late_corrections": {"last": late}}, {"last": record(0.98)})
+    assert any("| control | +5.0 [+1.2, +8.5] |" in line for line in lines)

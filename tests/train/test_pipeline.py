@@ -19,7 +19,7 @@ from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.checkpoint import AGENT_FILE, resolve_checkpoint
 from lanrocli.train.curriculum import Curriculum, load_curriculum
 from lanrocli.train.errors import RunError
-from lanrocli.train.generalisation import CONTROL, CONTROLLED
+from lanrocli.train.generalisation import CONTROL, CONTROLLED, DROP
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
 from lanrocli.train.recovery import restore_files as _restore_files
 from lanrocli.train.runfolder import (
@@ -209,6 +209,7 @@ def test_the_run_folder_has_every_file(straight: Baseline) -> None:
                 control = record[CONTROL]
                 assert control["episodes"] == 2 and control["env"] == record["env"]
                 assert control["episodes_from"] == {"control_of": split, "first_seed": split_test_seed(5, 2, Split(split))}
+                assert set(record[DROP]) == {"corrected"}
             else:
                 assert CONTROL not in record
         assert f"| {split} | last |" in table
