@@ -67,7 +67,8 @@ def train_command(
             "--from",
             metavar="RUN",
             help="Begin where the run in RUN ended the stage before the first in which its curriculum and this one "
-            "differ (they may differ in their stages alone): its earlier stages are copied, not trained again.",
+            "differ (they may differ in their stages alone, or add stages after RUN's last): its earlier stages are "
+            "copied, not trained again.",
         ),
     ] = None,
     quick: Annotated[

@@ -3,14 +3,17 @@ without training its early stages again (``lanro train VARIANT --from RUN``).
 
 The variant must agree with RUN's curriculum on everything but its name and its stages from some stage on;
 the first stage in which they differ is where the new run begins. RUN must have finished the stage before
-it. The new run then holds what RUN held when that stage ended: the agent, replay buffer, random streams
-and counters of the checkpoint written then, and the earlier stages' folders (agents and tests), metrics
-and TensorBoard events, copied. Training is deterministic per seed on a given machine, so the new run
-goes on exactly as a run of the variant from its first step would, at the cost of its new stages alone.
+it, which may be its last where the variant adds stages after RUN's end. The new run then holds what RUN
+held when that stage ended: the agent, replay buffer, random streams and counters of the checkpoint written
+then, and the earlier stages' folders (agents and tests), metrics and TensorBoard events, copied. Training
+is deterministic per seed on a given machine, so the new run goes on exactly as a run of the variant from
+its first step would, at the cost of its new stages alone. (A copied stage that was RUN's last keeps the
+tests of a last stage: its correction test and splits.)
 """
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 from pathlib import Path
 
@@ -79,11 +82,7 @@ def branch(
     state = RunState.from_dict(extra["run"])
     try:
         if state.finished:
-            raise RunError(
-                f"--from {source}: that run ended with its stage {index} ({planned.stages[index - 1].name}), so it "
-                "never began the stage the new run would begin with. A variant may change stages the run entered, "
-                "not add stages after its end; start a new run without --from."
-            )
+            state = _reopened(state, index, trainer.progress.env_steps, source)
         if state.stage != index:
             raise RunError(
                 f"--from {source}: its stage {index} ({planned.stages[index - 1].name}) has not ended yet, and the "
@@ -108,6 +107,21 @@ def branch(
         raise
     run.notes.append(f"began at stage {index + 1} from {ended / LAST} ({state.stage_start:,} environment steps)")
     return run
+
+
+def _reopened(state: RunState, index: int, env_steps: int, source: Path) -> RunState:
+    """The state of a run that completed its curriculum with stage ``index - 1``, as it would have been had
+    the curriculum gone on: the variant adds stages after the run's end (a stricter last rule, a larger
+    budget, a harder stage), and they begin where it ended, as they would in a run of the variant from its
+    first step. A run stopped by a budget (``on_budget: stop``) would stop there in the variant too."""
+    if state.stopped_early:
+        raise RunError(
+            f"--from {source}: that run stopped when the budget of its stage {index} ran out (on_budget: stop), "
+            "and the curriculum given now stops there too: change that stage, or start a new run without --from."
+        )
+    return dataclasses.replace(
+        state, finished=False, stage=index, stage_start=env_steps, evaluations=0, window=[], best=None
+    )
 
 
 def _copy_stages(stages: list[Stage], source: Path, out: Path) -> list[str]:

@@ -96,10 +96,36 @@ def test_a_branched_run_stopped_and_resumed_ends_as_the_variant_run_from_its_fir
     assert outcome(tmp_path / "branched") == outcome(tmp_path / "scratch") and not leftover.exists()
     assert load_curriculum(tmp_path / "branched" / CONFIG) == load_curriculum(path)
 
-    fourth = "  - name: fourth\n    env: {objects: 2}\n    budget: {steps: 40}\nholdout:"
-    (tmp_path / "fourth.yaml").write_text(straight.curriculum.read_text().replace("holdout:", fourth))
-    with pytest.raises(RunError, match="ended with its stage 3"):  # the run never began a fourth stage
-        branch(load_curriculum(tmp_path / "fourth.yaml"), straight.out, tmp_path / "fourth")
+
+@pytest.mark.slow
+def test_a_stage_added_after_a_run_ended_goes_on_as_the_variant_run_from_its_first_step(
+    tmp_path: Path, straight: Baseline
+) -> None:
+    fourth = "  - name: fourth\n    env: {objects: 2, max_episode_steps: 15}\n    budget: {steps: 40}\nholdout:"
+    path = tmp_path / "fourth.yaml"
+    path.write_text(straight.curriculum.read_text().replace("holdout:", fourth))
+    finish(train([str(path), "--out", "scratch"], tmp_path))
+    output = finish(train([str(path), "--from", str(straight.out), "--out", "continued"], tmp_path))
+
+    assert "began at stage 4" in output
+    (metrics, stages, tests), scratch = outcome(tmp_path / "continued"), outcome(tmp_path / "scratch")
+    assert (metrics, stages) == scratch[:2] and [name for name, *_ in stages][-1] == "fourth"
+    # The fourth stage's agents measured alike; the third, copied, keeps the tests it had as the run's last.
+    assert tests[3] == scratch[2][3] and "correction_test" in tests[2] and "correction_test" not in scratch[2][2]
+
+
+def test_a_run_stopped_by_its_budget_is_not_continued(tmp_path: Path) -> None:
+    source = tmp_path / "source"
+    rule = "promote: {success: 1.0"
+    stop = variant(tiny(tmp_path), tmp_path, rule + "}", rule + ", patience: 2}\n    on_budget: stop")
+    run = CurriculumRun.start(load_curriculum(stop), source)
+    run.run()
+    run.close()
+    assert run.state.stopped_early  # its rule asks for every episode of two evaluations won
+    second = "correction_rate: 0.5, max_episode_steps: 20}\n    budget: {steps: "
+    longer = variant(stop, tmp_path, second + "80}", second + "120}")
+    with pytest.raises(RunError, match=r"stopped when the budget of its stage 1 ran out(.|\n)*stops there too"):
+        branch(load_curriculum(longer), source, tmp_path / "new")
 
 
 def test_the_cli_refuses_from_with_resume(tmp_path: Path) -> None:
