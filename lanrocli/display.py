@@ -32,7 +32,7 @@ RATE_WINDOW = 10.0
 def _rule(stage: Stage) -> str:
     if stage.promote is None:
         return "runs its whole budget"
-    return f"promote at {stage.promote.on} success >= {stage.promote.success:g} ({stage.promote.patience}x)"
+    return f"promote at {stage.promote.described()}"
 
 
 def _percent(value: Any) -> str:

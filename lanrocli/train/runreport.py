@@ -57,10 +57,7 @@ def _stage_lines(curriculum: Curriculum, state: RunState) -> list[str]:
     ]
     for result in state.results:
         stage = curriculum.stages[result.index]
-        rule = "-"
-        if stage.promote:
-            p = stage.promote
-            rule = f"{p.on} {'>=' if p.statistic == 'mean' else 'lower bound >='} {p.success:g}, {p.patience} pooled"
+        rule = stage.promote.described() if stage.promote else "-"
         own = curriculum.evaluation(result.index)
         if own != curriculum.eval:
             judged = f"evaluation on {own.described()} every {own.every:,} steps"

@@ -84,6 +84,11 @@ class Promote(BaseModel):
     statistic: Literal["mean", "lower_bound"] = "mean"
     """``mean``: the pooled success rate; ``lower_bound``: the lower end of its 95% Wilson interval."""
 
+    def described(self) -> str:
+        """The rule as ``lanro train`` and ``report.md`` state it: ``corrected >= 0.9, 3 pooled``."""
+        statistic = ">=" if self.statistic == "mean" else "lower bound >="
+        return f"{self.on} {statistic} {self.success:g}, {self.patience} pooled"
+
     @field_validator("on", mode="before")
     @classmethod
     def _renamed(cls, on: Any) -> Any:
