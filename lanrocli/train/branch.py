@@ -119,9 +119,9 @@ def _reopened(state: RunState, index: int, env_steps: int, source: Path) -> RunS
             f"--from {source}: that run stopped when the budget of its stage {index} ran out (on_budget: stop), "
             "and the curriculum given now stops there too: change that stage, or start a new run without --from."
         )
-    return dataclasses.replace(
-        state, finished=False, stage=index, stage_start=env_steps, evaluations=0, window=[], best=None
-    )
+    reopened = dataclasses.replace(state, finished=False)
+    reopened.begin(index, env_steps)
+    return reopened
 
 
 def _copy_stages(stages: list[Stage], source: Path, out: Path) -> list[str]:

@@ -231,9 +231,7 @@ class CurriculumRun:
             state.stopped_early = stop
             state.finished = stop or index + 1 == len(self.curriculum.stages)
             if not state.finished:
-                state.stage, state.stage_start, state.evaluations, state.window, state.best = (
-                    index + 1, trainer.progress.env_steps, 0, [], None
-                )
+                state.begin(index + 1, trainer.progress.env_steps)
         self._checkpoint(stage_index=index, best=improved)
         if result is not None:
             self._test(result, should_stop)

@@ -57,6 +57,10 @@ class RunState:
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
+    def begin(self, stage: int, env_steps: int) -> None:
+        """Move on to ``stage``, which starts at ``env_steps`` with no evaluation, rule window or best yet."""
+        self.stage, self.stage_start, self.evaluations, self.window, self.best = stage, env_steps, 0, [], None
+
     def rates(self, result: StageResult) -> dict[str, float | None] | None:
         """Steps or updates per second of each phase during ``result``'s stage (``PhaseClock.rates``); None
         where the clock was not kept at its end or the previous stage's."""
