@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from lanrocli.choices import Kind, Split
+from lanrocli.choices import Split
 from lanrocli.envs.figures import FIGURE, EpisodeResult
 from lanrocli.stats import paired_rate_difference
 
@@ -25,17 +25,20 @@ class SplitFigure:
 
     split: Split
     name: str
+    """The key of its drop in a split record."""
     label: str
     figure: str
-    """The name in ``FIGURES`` of the rate it reads: which episodes it counts."""
+    """The name in ``FIGURES`` of the rate it reads: which episodes it counts and where a record keeps it."""
 
     def read(self, record: dict[str, Any]) -> dict[str, Any] | None:
         """The figure's rate (``episodes``, ``success``, ``ci``) in a test record, or None if it has none."""
-        if self.name == "success":
+        where = FIGURE[self.figure].where
+        if not where:  # the record's own rate, whose interval sits beside it
             return {"episodes": record["episodes"], "success": record["success"], "ci": record["success_ci"]}
-        if self.name == "common_ground":
-            return record["by_kind"].get(Kind.COMMON_GROUND.value, {}).get("corrected")
-        return record[self.name]
+        node: Any = record
+        for key in where:
+            node = node.get(key) if isinstance(node, dict) else None
+        return node if isinstance(node, dict) else None
 
 
 CONTROLLED: frozenset[Split] = frozenset({Split.CORRECTION_WORDS, Split.LATE_CORRECTIONS})
