@@ -128,14 +128,18 @@ class Figure:
     def read(self, record: Mapping[str, Any]) -> tuple[int, float | None]:
         """Episodes and success of this figure in a record: (0, None) where it has none."""
         for where in (self.where, self.older):
-            if where is None:
-                continue
-            node: Any = record
-            for key in where:
-                node = node.get(key) if isinstance(node, Mapping) else None
-            if isinstance(node, Mapping) and node.get(self.keys[0]):
+            node = None if where is None else entry(record, where)
+            if node is not None and node.get(self.keys[0]):
                 return int(node[self.keys[0]]), node.get(self.keys[1])
         return 0, None
+
+
+def entry(record: Mapping[str, Any], where: tuple[str, ...]) -> Mapping[str, Any] | None:
+    """The mapping that the keys ``where`` lead to in a record, or None where they lead to none."""
+    node: Any = record
+    for key in where:
+        node = node.get(key) if isinstance(node, Mapping) else None
+    return node if isinstance(node, Mapping) else None
 
 
 def _kind_figures(kind: Kind) -> tuple[Figure, Figure]:

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from lanrocli.choices import Split
-from lanrocli.envs.figures import FIGURE, EpisodeResult
+from lanrocli.envs.figures import FIGURE, EpisodeResult, entry
 from lanrocli.stats import paired_rate_difference
 
 
@@ -35,10 +35,8 @@ class SplitFigure:
         where = FIGURE[self.figure].where
         if not where:  # the record's own rate, whose interval sits beside it
             return {"episodes": record["episodes"], "success": record["success"], "ci": record["success_ci"]}
-        node: Any = record
-        for key in where:
-            node = node.get(key) if isinstance(node, dict) else None
-        return node if isinstance(node, dict) else None
+        node = entry(record, where)
+        return None if node is None else dict(node)
 
 
 CONTROLLED: frozenset[Split] = frozenset({Split.CORRECTION_WORDS, Split.LATE_CORRECTIONS})
