@@ -396,6 +396,16 @@ def test_eval_table_has_every_form_and_marks_what_is_not_judged() -> None:
     assert "wrong_object, correction spoken *" in result.output and "* fewer than 30 spoken corrections" in result.output
 
 
+def test_eval_probes_second_corrections_and_refuses_a_second_mistake_without_chains() -> None:
+    probe = ["eval", "oracle", "--episodes", "4", "--objects", "3", "--correction-rate", "1", "--mistake-start", "1",
+             "--second-mistake", "1", "--json"]
+    result = runner.invoke(app, [*probe, "--max-corrections", "2"])
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.output)["by_index"]["2"]["episodes"] >= 3  # a mistake the oracle left unfinished opens early
+    refused = runner.invoke(app, probe)
+    assert refused.exit_code == 2 and "max_corrections 2 (got 1)" in refused.output, refused.output
+
+
 def test_eval_correction_test_of_a_checkpoint_and_its_refusals(untrained_checkpoint: Path) -> None:
     result = runner.invoke(app, ["eval", str(untrained_checkpoint), "--correction-test", "--episodes", "2", "--json"])
     assert result.exit_code == 0, result.output

@@ -11,15 +11,14 @@ from lanrocli.choices import Kind, Split
 from lanrocli.envs.instructor import Instructor
 from lanrocli.envs.scene import Scene, check_scenes, sample_scene
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.envs.starts import place_arm
 from lanrocli.language import COLOURS, SHAPES, Vocabulary, grammar_vocabulary, max_sentence_words
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.reward import reward
 from lanrocli.sim import (
-    MAX_FINGER_WIDTH,
     MAX_STEP,
     OBJECT_AREA,
     SHAPES as SIM_SHAPES,
-    WORKSPACE,
     ObjectSet,
     Panda,
     World,
@@ -39,15 +38,6 @@ MIN_SPACING_SIZES = 3.0
 """Objects start at least this many object sizes apart."""
 
 IMAGE_SIZE = (480, 360)
-
-START_HEIGHT = (WORKSPACE.low[2], 0.10)
-"""Heights (m) of the end effector at a random start: from the workspace floor to the neutral pose's."""
-
-START_CLEARANCE = 0.01
-"""A random start keeps every part of the arm this far (m) from every object."""
-
-START_TRIES = 50
-"""Random start positions tried before falling back to the neutral pose (nine in ten are clear)."""
 
 MISTAKE_STEPS = 40
 """Most steps the scripted oracle is given to do the task on a wrong object at a mistake start (it needs 10
@@ -91,7 +81,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     Episodes start with the end effector at (0, 0, 0.10); ``random_start`` is the share that starts at a
     random point of the workspace near the table instead, clear of the objects, ``object_start`` (grasp
     and lift) the share that starts with the open hand around a random object, and ``mistake_start`` the
-    share that starts with the task just done on a wrong object (all for training).
+    share that starts with the task just done on a wrong object, of which ``second_mistake`` goes on, once
+    that is corrected, to another wrong object (all for training).
 
     ``instruction`` is the current goal sentence (instruction, plus the correction from the step it is
     spoken) as token ids of ``vocabulary`` (by default the grammar's; an agent's own when one is run),
@@ -205,7 +196,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.objects.clear()
         for obj, (x, y) in zip(scene.objects, scene.positions):
             self.objects.spawn(obj.shape, obj.colour, resting_position(obj.shape, x, y))
-        self._reset_arm(rng)
+        place_arm(self.robot, self.objects, self.settings, rng)
         self._start_positions = np.array(self.objects.states().positions)
         self._heights = np.array([SIM_SHAPES[o.shape].height for o in scene.objects])
         self._properties[:] = 0.0
@@ -215,41 +206,13 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.instructor.start(rng, scene, challenge)
         if self.settings.mistake_start > 0.0 and rng.random() < self.settings.mistake_start:
             self._act_on_a_wrong_object(rng)
+            if self.settings.second_mistake > 0.0 and rng.random() < self.settings.second_mistake:
+                self._err_twice(rng)
         self._tokens = self.vocabulary.encode(self.instructor.text)
         self._steps = 0
         self._achieved = self._evaluate()
         self._fell = False
         return self._observation(), self._info()
-
-    def _reset_arm(self, rng: np.random.Generator) -> None:
-        """The neutral pose, or with probability ``object_start`` the open hand around an object, or with
-        probability ``random_start`` a random point clear of the objects.
-
-        A correction leaves the hand low beside the wrong object, a state the neutral start (10 cm up, in
-        the middle) seldom leads to; random starts near the table make it common in training. A random arm
-        almost never holds an object, so hindsight has no grasp to relabel (``benchmarks/exploration.py``);
-        from around an object, closing and raising the hand is a matter of a few lucky steps.
-        """
-        shares = self.settings.object_start, self.settings.random_start
-        draw = rng.random() if any(shares) else 1.0
-        if draw < shares[0] and self._start_around_object(rng):
-            return
-        if shares[0] <= draw < sum(shares):
-            low = (*WORKSPACE.low[:2], START_HEIGHT[0])
-            high = (*WORKSPACE.high[:2], START_HEIGHT[1])
-            for _ in range(START_TRIES):
-                self.robot.reset(MAX_FINGER_WIDTH, ee_position=rng.uniform(low, high))
-                if self.robot.clear_of(self.objects.body_ids, START_CLEARANCE):
-                    return
-        self.robot.reset(MAX_FINGER_WIDTH)  # open, where the arm has fingers to open
-
-    def _start_around_object(self, rng: np.random.Generator) -> bool:
-        """The open hand with a random object between its fingers, at the object's centre height (clipped to
-        the workspace); ``False`` where the fingers would cut into it (a cuboid turned across them)."""
-        target = int(rng.integers(self.n_objects))
-        position = self.objects.states().positions[target]
-        self.robot.reset(MAX_FINGER_WIDTH, ee_position=position)
-        return self.robot.clear_of(self.objects.body_ids, 0.0)
 
     def _act_on_a_wrong_object(self, rng: np.random.Generator) -> None:
         """The task done on a random wrong object by the scripted oracle before the first step, unseen by the
@@ -257,7 +220,26 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         own mistakes, and in correction episodes the recovery from it (let go, move off, go to the goal
         beside what was just moved) is where corrections are lost; a mistake start shows it in any stage."""
         assert self._scene is not None
-        wrong = int(rng.choice([k for k in range(self.n_objects) if k != self._scene.goal_index]))
+        self._do_the_task_on(int(rng.choice([k for k in range(self.n_objects) if k != self._scene.goal_index])))
+
+    def _err_twice(self, rng: np.random.Generator) -> None:
+        """After a mistake start, the instructor corrects it at once, the oracle does the task on the other
+        wrong object, and the instructor corrects that too: the episode opens with the arm on a wrong object
+        and a sentence of two corrections. An agent meets that sentence only after misreading a first
+        correction, about once in a hundred correction episodes, too seldom to learn to read it; hindsight
+        relabelling writes such chains only where the arm itself visited two wrong objects. Where a step
+        of this does not happen (no correction to speak, the oracle unfinished) the episode opens there."""
+        assert self._scene is not None
+        achieved = self._evaluate()
+        if not self.instructor.correct_at_once(rng, achieved):
+            return
+        left = [k for k in range(self.n_objects) if k != self._scene.goal_index and not achieved[k]]
+        if left:
+            self._do_the_task_on(int(rng.choice(left)))
+            self.instructor.correct_at_once(rng, self._evaluate())
+
+    def _do_the_task_on(self, wrong: int) -> None:
+        assert self._scene is not None
         half_extents = np.array([SIM_SHAPES[obj.shape].half_extents for obj in self._scene.objects])
         memory = OracleMemory()
         for _ in range(MISTAKE_STEPS):

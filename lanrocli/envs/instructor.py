@@ -176,10 +176,8 @@ class Instructor:
 
     def observe(self, rng: np.random.Generator, step: int, achieved: np.ndarray) -> bool:
         """Watch the state after ``step``; return True when the goal sentence changed at this step."""
-        if self.challenge is None or len(self.corrections) >= self.settings.max_corrections or self._scene is None:
-            return False
         if self._trigger is None:
-            wrong = [int(i) for i in np.flatnonzero(achieved) if i != self._scene.goal_index and i not in self._corrected]
+            wrong = self._uncorrected_mistakes(achieved)
             if not wrong:
                 return False
             self._trigger = (step, int(pick(rng, wrong)))
@@ -189,10 +187,29 @@ class Instructor:
         triggered_at, touched = self._trigger
         if step < triggered_at + self._delay:
             return False
+        self._speak(rng, step, triggered_at, touched)
+        return True
+
+    def correct_at_once(self, rng: np.random.Generator, achieved: np.ndarray) -> bool:
+        """Speak the next correction now, before the first step and without a delay, where ``observe``
+        would schedule one: a mistake start that goes on to a second mistake (``EnvSettings.second_mistake``)
+        corrects both before the episode opens. Return whether one was spoken."""
+        wrong = self._uncorrected_mistakes(achieved)
+        if not wrong:
+            return False
+        self._speak(rng, 0, 0, int(pick(rng, wrong)))
+        return True
+
+    def _uncorrected_mistakes(self, achieved: np.ndarray) -> list[int]:
+        """The wrong objects the task holds for and no correction named yet, where one more may be spoken."""
+        if self.challenge is None or len(self.corrections) >= self.settings.max_corrections or self._scene is None:
+            return []
+        return [int(i) for i in np.flatnonzero(achieved) if i != self._scene.goal_index and i not in self._corrected]
+
+    def _speak(self, rng: np.random.Generator, step: int, triggered_at: int, touched: int) -> None:
         self.corrections.append(self._correct(rng, step, triggered_at, touched))
         self._corrected.add(touched)
         self._trigger = None
-        return True
 
     @property
     def names_goal(self) -> bool:

@@ -84,6 +84,15 @@ class EnvSettings:
             "corrects, drawn on top of the arm's start."
         ),
     )
+    second_mistake: float = field(
+        default=0.0,
+        metadata=_help(
+            "Share of mistake starts in correction episodes that go on before the first step: the instructor "
+            "corrects the mistake, the oracle does the task on the other wrong object, and the instructor "
+            "corrects again, so the episode opens after a second correction (needs mistake_start, "
+            "max_corrections 2 and three objects)."
+        ),
+    )
     scripted_recovery: float = field(
         default=0.0,
         metadata=_help(
@@ -107,6 +116,16 @@ class EnvSettings:
             raise ValueError(f"random_start must be a probability within [0, 1], got {self.random_start}")
         if not 0.0 <= self.mistake_start <= 1.0:
             raise ValueError(f"mistake_start must be a probability within [0, 1], got {self.mistake_start}")
+        if not 0.0 <= self.second_mistake <= 1.0:
+            raise ValueError(f"second_mistake must be a probability within [0, 1], got {self.second_mistake}")
+        chains = self.mistake_start > 0.0 and self.max_corrections >= 2 and self.objects == 3
+        if self.second_mistake > 0.0 and self.correction_rate > 0.0 and not chains:
+            raise ValueError(
+                f"second_mistake is {self.second_mistake:g}, a share of mistake starts that go on to a second "
+                f"wrong object and its correction: it needs mistake_start above 0 (got {self.mistake_start:g}), "
+                f"max_corrections 2 (got {self.max_corrections}) and objects 3 (got {self.objects}); set those, "
+                "or leave second_mistake at 0"
+            )
         if not 0.0 <= self.scripted_recovery <= 1.0:
             raise ValueError(f"scripted_recovery must be a probability within [0, 1], got {self.scripted_recovery}")
         if not 0.0 <= self.object_start <= 1.0 - self.random_start:
@@ -142,7 +161,7 @@ class EnvSettings:
         success is comparable across runs and curricula.
         ``correction_rate``, where given, replaces a non-zero share of correction episodes; settings without
         corrections keep none, since their episodes are not built to hold one."""
-        training_only = ("random_start", "object_start", "mistake_start", "scripted_recovery")
+        training_only = ("random_start", "object_start", "mistake_start", "second_mistake", "scripted_recovery")
         changes: dict[str, Any] = dict.fromkeys(training_only, 0.0)
         if correction_rate is not None and self.correction_rate > 0:
             changes["correction_rate"] = correction_rate

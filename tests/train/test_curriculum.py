@@ -84,6 +84,7 @@ def test_env_section_is_the_environments_settings() -> None:
         "random_start": 0.0,
         "object_start": 0.0,
         "mistake_start": 0.0,
+        "second_mistake": 0.0,
         "scripted_recovery": 0.0,
     }
     assert list(EnvConfig.model_fields) == [f.name for f in dataclasses.fields(EnvSettings)]
@@ -204,6 +205,14 @@ def test_a_stage_evaluation_replaces_the_curriculums_keys_it_gives_for_that_stag
     assert curriculum.quick().evaluation(1).episodes == 5
     problem = only_problem(write(tmp_path, "e.yaml", text.replace("correction_rate: 1", "correction_rate: 2")))
     assert (problem.line, problem.path) == (9, "stages[1].eval.correction_rate") and "less than or equal" in problem.message
+
+
+def test_a_second_mistake_needs_mistake_starts_and_chains(tmp_path: Path) -> None:
+    text = MINIMAL + "    env: {objects: 3, correction_rate: 1, mistake_start: 0.5, second_mistake: 0.5}\n"
+    problem = only_problem(write(tmp_path, "c.yaml", text))
+    assert (problem.line, problem.path) == (6, "stages[0].env") and "max_corrections 2 (got 1)" in problem.message
+    stage = load_curriculum(write(tmp_path, "ok.yaml", text.replace("objects: 3", "objects: 3, max_corrections: 2"))).stages[0]
+    assert stage.env.settings().second_mistake == 0.5
 
 
 def test_common_ground_needs_rare_words(tmp_path: Path) -> None:
