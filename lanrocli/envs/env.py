@@ -226,9 +226,9 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         """After a mistake start, the instructor corrects it at once, the oracle does the task on the other
         wrong object, and the instructor corrects that too: the episode opens with the arm on a wrong object
         and a sentence of two corrections. An agent meets that sentence only after misreading a first
-        correction, about once in a hundred correction episodes, too seldom to learn to read it; hindsight
-        relabelling writes such chains only where the arm itself visited two wrong objects. Where a step
-        of this does not happen (no correction to speak, the oracle unfinished) the episode opens there."""
+        correction, and hindsight relabelling writes such chains only where the arm itself visited two wrong
+        objects. Where a step of this does not happen (no correction to speak, the oracle unfinished) the
+        episode opens there."""
         assert self._scene is not None
         achieved = self._evaluate()
         if not self.instructor.correct_at_once(rng, achieved):
