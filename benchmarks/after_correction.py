@@ -1,7 +1,8 @@
 """What a trained agent does once a correction is spoken: the part of a correction episode that decides it.
 
 Runs a checkpoint's deterministic policy on correction episodes (from the neutral start, like evaluation)
-and sorts every episode in which the instructor spoke into:
+and sorts every episode in which the instructor spoke (``--after 2``: spoke a second time, in a stage with
+chains of corrections; everything below then counts from the second) into:
 
 - *succeeded*: the arm then did the task on the goal object;
 - *knocked the goal*: it failed, and the goal ended up farther from its start than reach allows (2.5 cm),
@@ -16,10 +17,19 @@ lift, where what an object has achieved is its being held (or raised), it also s
 another object when the correction was spoken (and how many of those still succeeded), and how many failures
 still held one at the end: a hand that never lets go of the wrong object cannot take the goal.
 
+And where the arm went next: the first object the task's condition came to hold for after the correction
+(the goal; an object it had already acted on, the one corrected or an earlier one; one it had not), or,
+where none, whether it stayed on a wrong object to the end. A second correction comes after the arm
+misread a first: this tells an arm that goes back to an object already ruled out (it reads the last
+correction alone) from one that stays (it reads none) or goes nowhere.
+
     python benchmarks/after_correction.py runs/learning-corrections --episodes 100
+    python benchmarks/after_correction.py reach --after 2 --episodes 12000 --negation-rate 0.5 \
+        --kinds ambiguity common_ground instruction_correction wrong_object
 
 The episodes use seeds ``--seed`` onwards, the checkpoint's task and object count, and the kinds of
-misunderstanding named by ``--kinds`` (default: the two in which the arm must first touch a wrong object).
+misunderstanding named by ``--kinds`` (default: the two in which the arm must first touch a wrong object);
+``--negation-rate 0.5`` makes half the corrections negations, as the correction test does.
 """
 
 from __future__ import annotations
@@ -38,6 +48,7 @@ from lanrocli.tasks.reach import REACH_STILL
 from lanrocli.tasks.registry import task_class
 from lanrocli.train.agent_policy import AgentPolicy
 from lanrocli.train.pretrained import agent_path
+from lanrocli.train.testset import CORRECTION_TEST_NEGATION_RATE
 from lanrocli.train.trainer import load_policy
 
 
@@ -50,22 +61,51 @@ class Outcome:
     first_knock: str | None  # e.g. "another object, after the correction"; None if nothing moved 2.5 cm
     held_other_at_correction: bool  # another object achieved (held, raised) on the step the correction came
     held_other_at_end: bool  # another object achieved on the last step
+    went_next: str  # where the arm went after the correction (``WENT``)
+    forms: str  # the forms of the corrections spoken up to it, first to last: "negation, excuse"
+    goal_knocked_at_correction: bool  # the goal already more than 2.5 cm from its start when it was spoken
 
 
-def run(env: LanroEnv, policy: AgentPolicy, seed: int) -> Outcome | None:
+WENT = ("the goal", "back to the object corrected", "back to an object corrected earlier",
+        "to another object", "stayed on a wrong object", "to no object")
+
+
+def _went(goal: int, before: list[int], after: list[int], on_other_at_end: bool) -> str:
+    """Where the arm went after the correction: ``before`` and ``after`` are the objects whose condition
+    came to hold, in order, up to and from the step the correction was spoken."""
+    if after:
+        first = after[0]
+        if first == goal:
+            return WENT[0]
+        if before and first == before[-1]:
+            return WENT[1]
+        return WENT[2] if first in before else WENT[3]
+    return WENT[4] if on_other_at_end else WENT[5]
+
+
+def run(env: LanroEnv, policy: AgentPolicy, seed: int, nth: int = 1) -> Outcome | None:
     obs, info = env.reset(seed=seed)
     start = info["object_positions"]
     goal = info["goal_index"]
     closest = np.inf
     first_knock = None
-    held_at_correction = spoken = done = False
+    held_at_correction = knocked_at_correction = spoken = done = False
+    achieved = np.zeros_like(info["achieved"])
+    reached: tuple[list[int], list[int]] = ([], [])  # objects whose condition came to hold: before, after
+    forms: list[str] = []
     while not done:
         obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
         done = terminated or truncated
         others_achieved = bool(np.delete(info["achieved"], goal).any())
-        if not spoken and info["correction"] is not None:
+        correction = info["correction"]
+        if correction is not None and correction["index"] > len(forms):
+            forms.append(correction["form"])
+        if not spoken and correction is not None and correction["index"] >= nth:
             held_at_correction = others_achieved
-        spoken = info["correction"] is not None
+            knocked_at_correction = bool(np.linalg.norm(info["object_positions"][goal] - start[goal]) > REACH_STILL)
+            spoken = True
+        reached[spoken].extend(int(k) for k in np.flatnonzero(info["achieved"] & ~achieved))
+        achieved = info["achieved"]
         positions = info["object_positions"]
         if spoken:
             closest = min(closest, float(np.linalg.norm(positions[goal] - obs["observation"][:3])))
@@ -73,7 +113,7 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int) -> Outcome | None:
         if first_knock is None and np.any(moved > REACH_STILL):
             which = "the goal" if int(np.argmax(moved)) == goal else "another object"
             first_knock = f"{which}, {'after' if spoken else 'before'} the correction"
-    if info["correction"] is None:
+    if not spoken:
         return None
     if info["is_success"]:
         result = "succeeded"
@@ -83,7 +123,9 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int) -> Outcome | None:
         result = "knocked the goal"
     else:
         result = "fell short"
-    return Outcome(result, closest, first_knock, held_at_correction, others_achieved)
+    went = _went(goal, *reached, others_achieved)
+    return Outcome(result, closest, first_knock, held_at_correction, others_achieved, went, ", ".join(forms[:nth]),
+                   knocked_at_correction)
 
 
 def main() -> None:
@@ -92,6 +134,13 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--kinds", nargs="+", default=["ambiguity", "instruction_correction"])
+    parser.add_argument("--after", type=int, default=1, help="judge from the Nth correction spoken (default: the first)")
+    parser.add_argument(
+        "--negation-rate",
+        type=float,
+        help=f"share of corrections spoken as negations, where the agent's stage has them (default: the stage's; "
+        f"its correction test: {CORRECTION_TEST_NEGATION_RATE:g})",
+    )
     parser.add_argument(
         "--acting-attention", choices=[a.value for a in ActingAttention], help="default: as the agent was trained"
     )
@@ -101,20 +150,37 @@ def main() -> None:
     if args.acting_attention is not None:
         policy.agent.act_by(ActingAttention(args.acting_attention))
     env_settings = settings.env.for_evaluation().replace(correction_rate=1.0, kinds=tuple(args.kinds))
+    if args.negation_rate is not None and env_settings.negations:
+        env_settings = env_settings.replace(negation_rate=args.negation_rate)
     env = LanroEnv(
         settings.task, env_settings, object_slots=settings.slots, vocabulary=policy.vocabulary, holdout=settings.holdout
     )
-    outcomes = [run(env, policy, args.seed + i) for i in range(args.episodes)]
+    if not 1 <= args.after <= env_settings.max_corrections:
+        parser.error(f"--after {args.after}: the agent's stage speaks 1 to {env_settings.max_corrections} corrections")
+    outcomes = [run(env, policy, args.seed + i, args.after) for i in range(args.episodes)]
     env.close()
     spoken = [o for o in outcomes if o is not None]
     lost = [str(args.seed + i) for i, o in enumerate(outcomes) if o is not None and o.result != "succeeded"]
     print(f"{args.checkpoint}: {settings.task}, kinds {', '.join(args.kinds)}, seeds {args.seed}..")
-    print(f"{args.episodes} episodes, a correction was spoken in {len(spoken)}")
+    print(f"{args.episodes} episodes, correction {args.after} was spoken in {len(spoken)}")
     results = Counter(o.result for o in spoken)
     for result in ("succeeded", "knocked the goal", "the goal fell", "fell short"):
         near = [o.closest for o in spoken if o.result == result and np.isfinite(o.closest)]
         median = f", closest approach to the goal after it: median {np.median(near) * 100:.1f} cm" if near else ""
         print(f"  {result:<16} {results[result]:>4}{median}")
+    knocked = [o for o in spoken if o.goal_knocked_at_correction]
+    print(f"the goal already knocked (moved more than {REACH_STILL * 100:g} cm) when it was spoken: {len(knocked)}, "
+          f"{sum(o.result == 'succeeded' for o in knocked)} succeeded")
+    print("where the arm went next (failures of them in brackets):")
+    went = Counter(o.went_next for o in spoken)
+    went_lost = Counter(o.went_next for o in spoken if o.result != "succeeded")
+    for where in WENT:
+        print(f"  {where:<36} {went[where]:>4} ({went_lost[where]})")
+    print("the corrections' forms, first to last (failures of them in brackets):")
+    forms = Counter(o.forms for o in spoken)
+    forms_lost = Counter(o.forms for o in spoken if o.result != "succeeded")
+    for form, count in forms.most_common():
+        print(f"  {form:<36} {count:>4} ({forms_lost[form]})")
     knocks = Counter(o.first_knock for o in spoken if o.result != "succeeded" and o.first_knock is not None)
     print("first object knocked, in the failures:")
     for knock, count in knocks.most_common():
