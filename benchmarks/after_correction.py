@@ -21,7 +21,9 @@ And where the arm went next: the first object the task's condition came to hold 
 (the goal; an object it had already acted on, the one corrected or an earlier one; one it had not), or,
 where none, whether it stayed on a wrong object to the end. A second correction comes after the arm
 misread a first: this tells an arm that goes back to an object already ruled out (it reads the last
-correction alone) from one that stays (it reads none) or goes nowhere.
+correction alone) from one that stays (it reads none) or goes nowhere. For a negation among three objects
+it also says whether the object least like the one ruled out is the goal: an arm that reads "not the X" as
+"whatever is least like X", a reading that scenes of two objects never contradict, loses where it is not.
 
     python benchmarks/after_correction.py runs/learning-corrections --episodes 100
     python benchmarks/after_correction.py reach --after 2 --episodes 12000 --negation-rate 0.5 \
@@ -64,6 +66,20 @@ class Outcome:
     went_next: str  # where the arm went after the correction (``WENT``)
     forms: str  # the forms of the corrections spoken up to it, first to last: "negation, excuse"
     goal_knocked_at_correction: bool  # the goal already more than 2.5 cm from its start when it was spoken
+    shortcut: str | None  # a negation among three objects: is the object least like the one ruled out the goal?
+
+
+def _shortcut(objects: tuple, goal: int, ruled_out: int) -> str:
+    """Whether reading "not the X" as "the object least like X" finds the goal ("agrees"), the third object
+    ("disagrees"), or cannot tell ("tie"). A negation means the one object left of those the instruction
+    fits; in a scene of two objects the two readings agree, in one of three they need not."""
+    (other,) = {0, 1, 2} - {goal, ruled_out}
+
+    def shared(k: int) -> int:
+        a, b = objects[k], objects[ruled_out]
+        return (a.colour == b.colour) + (a.shape == b.shape)
+
+    return "tie" if shared(goal) == shared(other) else "agrees" if shared(goal) < shared(other) else "disagrees"
 
 
 WENT = ("the goal", "back to the object corrected", "back to an object corrected earlier",
@@ -90,6 +106,7 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int, nth: int = 1) -> Outcome 
     closest = np.inf
     first_knock = None
     held_at_correction = knocked_at_correction = spoken = done = False
+    shortcut = None
     achieved = np.zeros_like(info["achieved"])
     reached: tuple[list[int], list[int]] = ([], [])  # objects whose condition came to hold: before, after
     forms: list[str] = []
@@ -103,6 +120,9 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int, nth: int = 1) -> Outcome 
         if not spoken and correction is not None and correction["index"] >= nth:
             held_at_correction = others_achieved
             knocked_at_correction = bool(np.linalg.norm(info["object_positions"][goal] - start[goal]) > REACH_STILL)
+            wrong = [k for k in reached[0] if k != goal]  # the last of them is the one this correction rules out
+            if correction["form"] == "negation" and len(info["objects"]) == 3 and wrong:
+                shortcut = _shortcut(info["objects"], goal, wrong[-1])
             spoken = True
         reached[spoken].extend(int(k) for k in np.flatnonzero(info["achieved"] & ~achieved))
         achieved = info["achieved"]
@@ -125,7 +145,7 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int, nth: int = 1) -> Outcome 
         result = "fell short"
     went = _went(goal, *reached, others_achieved)
     return Outcome(result, closest, first_knock, held_at_correction, others_achieved, went, ", ".join(forms[:nth]),
-                   knocked_at_correction)
+                   knocked_at_correction, shortcut)
 
 
 def main() -> None:
@@ -181,6 +201,11 @@ def main() -> None:
     forms_lost = Counter(o.forms for o in spoken if o.result != "succeeded")
     for form, count in forms.most_common():
         print(f"  {form:<36} {count:>4} ({forms_lost[form]})")
+    print(f"negations as correction {args.after} among three objects, by whether the object least like the one "
+          "ruled out is the goal (failures in brackets):")
+    for reading in ("agrees", "disagrees", "tie"):
+        read = [o for o in spoken if o.shortcut == reading]
+        print(f"  {reading:<36} {len(read):>4} ({sum(o.result != 'succeeded' for o in read)})")
     knocks = Counter(o.first_knock for o in spoken if o.result != "succeeded" and o.first_knock is not None)
     print("first object knocked, in the failures:")
     for knock, count in knocks.most_common():
