@@ -46,6 +46,7 @@ import torch
 
 from lanrocli.choices import ActingAttention
 from lanrocli.envs.env import LanroEnv
+from lanrocli.language.properties import ObjectProps
 from lanrocli.tasks.reach import REACH_STILL
 from lanrocli.tasks.registry import task_class
 from lanrocli.train.agent_policy import AgentPolicy
@@ -69,7 +70,7 @@ class Outcome:
     shortcut: str | None  # a negation among three objects: is the object least like the one ruled out the goal?
 
 
-def _shortcut(objects: tuple, goal: int, ruled_out: int) -> str:
+def _shortcut(objects: tuple[ObjectProps, ...], goal: int, ruled_out: int) -> str:
     """Whether reading "not the X" as "the object least like X" finds the goal ("agrees"), the third object
     ("disagrees"), or cannot tell ("tie"). A negation means the one object left of those the instruction
     fits; in a scene of two objects the two readings agree, in one of three they need not."""
