@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lanrocli.choices import ActingAttention
+from lanrocli.choices import ActingAttention, CorrectionForm
 from lanrocli.envs.env import LanroEnv
 from lanrocli.language.properties import ObjectProps
 from lanrocli.tasks.reach import REACH_STILL
@@ -115,22 +115,22 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int, nth: int = 1) -> Outcome 
         obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
         done = terminated or truncated
         others_achieved = bool(np.delete(info["achieved"], goal).any())
+        positions = info["object_positions"]
+        moved = np.linalg.norm(positions - start, axis=1)
         correction = info["correction"]
         if correction is not None and correction["index"] > len(forms):
             forms.append(correction["form"])
         if not spoken and correction is not None and correction["index"] >= nth:
             held_at_correction = others_achieved
-            knocked_at_correction = bool(np.linalg.norm(info["object_positions"][goal] - start[goal]) > REACH_STILL)
+            knocked_at_correction = bool(moved[goal] > REACH_STILL)
             wrong = [k for k in reached[0] if k != goal]  # the last of them is the one this correction rules out
-            if correction["form"] == "negation" and len(info["objects"]) == 3 and wrong:
+            if correction["form"] == CorrectionForm.NEGATION and len(info["objects"]) == 3 and wrong:
                 shortcut = _shortcut(info["objects"], goal, wrong[-1])
             spoken = True
         reached[spoken].extend(int(k) for k in np.flatnonzero(info["achieved"] & ~achieved))
         achieved = info["achieved"]
-        positions = info["object_positions"]
         if spoken:
             closest = min(closest, float(np.linalg.norm(positions[goal] - obs["observation"][:3])))
-        moved = np.linalg.norm(positions - start, axis=1)
         if first_knock is None and np.any(moved > REACH_STILL):
             which = "the goal" if int(np.argmax(moved)) == goal else "another object"
             first_knock = f"{which}, {'after' if spoken else 'before'} the correction"
