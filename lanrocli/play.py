@@ -43,14 +43,14 @@ from rich.markup import escape
 
 from lanrocli.choices import Task
 from lanrocli.envs.caption import caption
-from lanrocli.envs.env import FALLEN, IMAGE_SIZE, LanroEnv
+from lanrocli.envs.env import IMAGE_SIZE, LanroEnv
 from lanrocli.envs.evaluation import save_gif
 from lanrocli.envs.settings import CORRECTION_LIMIT, EnvSettings
 from lanrocli.language import TASK_VERBS, ObjectProps
 from lanrocli.language.typed import Grammar, Utterance, unknown_words, words_of
 from lanrocli.language.vocabulary import UNK
 from lanrocli.sim import CONTROL_DT, action_size
-from lanrocli.tasks import task_class
+from lanrocli.tasks import FALLEN, task_class
 from lanrocli.train.errors import CheckpointError
 from lanrocli.train.pretrained import agent_path
 from lanrocli.train.agent_policy import AgentPolicy

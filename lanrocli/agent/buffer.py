@@ -25,8 +25,9 @@ from lanrocli.agent.sampling import sampled_batch
 from lanrocli.agent.transitions import NEVER, NO_OBJECT, Batch, EpisodeData, stored_arrays
 from lanrocli.language import TASKS, Vocabulary, check_task, grammar_vocabulary
 
-_FORMAT = 2
-"""1: corrected sentences by target only, and no ``names_goal`` or ``first_achieved``; still read."""
+_FORMAT = 3
+"""1: corrected sentences by target only, and no ``names_goal`` or ``first_achieved``; 2: no ``lost``. Both
+still read."""
 
 
 
@@ -114,6 +115,9 @@ class ReplayBuffer:
         d["reward"][lo:hi] = episode.rewards
         d["terminated"][lo:hi] = episode.terminated
         d["fell"][lo:hi] = False if episode.fell is None else episode.fell
+        d["lost"][lo:hi] = False
+        if episode.lost is not None:
+            d["lost"][lo:hi, :n] = episode.lost
         d["instruction"][lo:hi] = episode.instructions
         d["next_instruction"][lo:hi] = episode.next_instructions
         d["achieved"][lo:hi] = False
@@ -206,6 +210,7 @@ class ReplayBuffer:
         fresh_targets: bool = False,
         ground_real: bool = False,
         falls_fail: bool = False,
+        lost_fails: bool = False,
     ) -> Batch:
         """``batch_size`` transitions drawn with replacement: a share ``hindsight_share`` (binomially) from
         the transitions whose episode achieves the task on an identifiable object at that step or later, the
@@ -229,6 +234,9 @@ class ReplayBuffer:
         ``falls_fail``: a transition whose last step dropped an object off the table, where its goal is
         not won at that step, is ``failed`` and ``done``: the environment ends such an episode, and the
         learner is to value what follows as failure for ever, not as the time limit it otherwise resembles.
+        ``lost_fails``: likewise where the transition's last step left the object its sentence is about (the
+        goal, or the relabelled target) where the task can no longer hold for it (``TaskDefinition.lost``),
+        and did not win.
 
         With ``n_step`` above 1 each transition spans up to ``n_step`` stored steps of its episode (fewer where
         the episode ends first, or where its goal, the relabelled one included, is achieved first): see
@@ -241,7 +249,7 @@ class ReplayBuffer:
         idx = self._draw(batch_size, rng, hindsight_share)
         return sampled_batch(
             self.data, idx, rng, self.pool_rows, relabel_ratio, correction_share, n_step, gamma, fresh_targets,
-            ground_real, falls_fail,
+            ground_real, falls_fail, lost_fails,
         )
 
     def _draw(self, batch_size: int, rng: np.random.Generator, hindsight_share: float) -> np.ndarray:
@@ -293,7 +301,7 @@ class ReplayBuffer:
     def from_state(cls, meta: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> ReplayBuffer:
         """The buffer that :meth:`state` described. ``arrays`` may hold more than the buffer's arrays, and
         may be an open ``np.load`` archive, which then reads each array only as it is copied in."""
-        if meta["format"] not in (1, _FORMAT):
+        if meta["format"] not in (1, 2, _FORMAT):
             raise ValueError(f"replay buffer file format {meta['format']} is not {_FORMAT}")
         buffer = cls(
             capacity=meta["capacity"],
@@ -307,9 +315,10 @@ class ReplayBuffer:
             chain=meta.get("chain", 1),
         )
         high = meta["high"]
+        missing = {name: fill for since, added in _ADDED.items() if meta["format"] < since for name, fill in added.items()}
         for name, array in buffer.data.items():
-            if meta["format"] == 1 and name in _ADDED_IN_2:
-                _ADDED_IN_2[name](array[:high], arrays)
+            if name in missing:
+                missing[name](array[:high], arrays)
             else:
                 array[:high] = arrays[name]
         buffer.rng.bit_generator.state = meta["rng"]
@@ -325,11 +334,17 @@ def _read_pool_of_format_1(array: np.ndarray, arrays: Mapping[str, np.ndarray]) 
     array[:] = np.asarray(arrays["corrected_pool"])[:, :, None, :]
 
 
-_ADDED_IN_2: dict[str, Callable[[np.ndarray, Mapping[str, np.ndarray]], None]] = {
-    "corrected_pool": _read_pool_of_format_1,
-    # What format 1 did not record reads as not known: no real transition is labelled for the attention,
-    # and relabelled corrections draw the touched object uniformly.
-    "names_goal": lambda array, _: array.fill(False),
-    "fell": lambda array, _: array.fill(False),
-    "first_achieved": lambda array, _: array.fill(NEVER),
+_Fill = Callable[[np.ndarray, Mapping[str, np.ndarray]], None]
+
+_ADDED: dict[int, dict[str, _Fill]] = {
+    2: {
+        "corrected_pool": _read_pool_of_format_1,
+        # What format 1 did not record reads as not known: no real transition is labelled for the attention,
+        # and relabelled corrections draw the touched object uniformly.
+        "names_goal": lambda array, _: array.fill(False),
+        "fell": lambda array, _: array.fill(False),
+        "first_achieved": lambda array, _: array.fill(NEVER),
+    },
+    3: {"lost": lambda array, _: array.fill(False)},
 }
+"""By the format that added them, the arrays an older file lacks and how each is filled in when read."""

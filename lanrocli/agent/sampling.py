@@ -22,6 +22,7 @@ def sampled_batch(
     fresh_targets: bool,
     ground_real: bool,
     falls_fail: bool,
+    lost_fails: bool,
 ) -> Batch:
     """The transitions stored at the slots ``idx``, relabelled and extended as :meth:`ReplayBuffer.sample`
     was asked."""
@@ -79,9 +80,13 @@ def sampled_batch(
     )
     if n_step > 1:
         _extend(data, batch, relabel, target, n_step, gamma)
+    final = batch.slots + batch.steps - 1
     if falls_fail:
-        batch.failed = data["fell"][batch.slots + batch.steps - 1] & ~batch.done
-        batch.done = batch.done | batch.failed
+        batch.failed |= data["fell"][final] & ~batch.done
+    if lost_fails:
+        about = np.where(relabel, named, data["goal_index"][idx].astype(np.int64))
+        batch.failed |= data["lost"][final, about] & ~batch.done
+    batch.done = batch.done | batch.failed
     return batch
 
 

@@ -172,6 +172,12 @@ class BufferSettings:
     failure that never ends, -1 / (1 - gamma)) rather than as one cut off by the time limit, whose future
     is bootstrapped. Without it nothing teaches the agent to keep objects on the table: pushing the wrong
     object on until it falls, while a correction is on its way, costs nothing in the targets."""
+    lost_fails: bool = False
+    """Value a transition that leaves the object its sentence is about where the task can no longer hold for
+    it (``TaskDefinition.lost``: fallen off the table; for reach, knocked farther than it may move) as lost
+    for good, as ``falls_fail`` does a fall. Reach needs it where falls do not: a goal knocked away on the
+    arm's way to a wrong object is lost though the episode runs on, and only the critic's bootstrap, over
+    the rest of the episode, would otherwise learn that."""
     n_step: int = 1
     """Bellman targets over this many stored steps (n-step returns), cut at the episode's end and at its
     goal's success: a sparse success reaches the states that led to it in 1/n of the updates. 1 is the
@@ -197,4 +203,5 @@ class BufferSettings:
             "fresh_targets": self.fresh_targets,
             "ground_real": self.ground_real,
             "falls_fail": self.falls_fail,
+            "lost_fails": self.lost_fails,
         }

@@ -25,7 +25,7 @@ from lanrocli.sim import (
     action_size,
     resting_position,
 )
-from lanrocli.tasks import ArmView, OracleMemory, TaskView, make_task
+from lanrocli.tasks import FALLEN, ArmView, OracleMemory, TaskView, make_task
 
 ARM_SIZE = 7
 """End-effector position (3), its linear velocity (3), finger width (1)."""
@@ -42,11 +42,6 @@ IMAGE_SIZE = (480, 360)
 MISTAKE_STEPS = 40
 """Most steps the scripted oracle is given to do the task on a wrong object at a mistake start (it needs 10
 to 20); a start whose oracle has not finished by then begins where it got to."""
-
-FALLEN = -0.05
-"""An object whose centre is lower than this (m) has fallen off the table. The goal's fall ends the episode,
-lost; another object's does not: the arm can still do what it was asked, and a correction episode whose
-wrong object was pushed off while the instructor waited to speak is not lost for that."""
 
 
 def observation_size(n_objects: int) -> int:
@@ -90,7 +85,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     object, else -1; success ends the episode (terminated), and so does the goal falling off the table
     (truncated, with ``info["fell"]``: the episode is lost, not merely out of time); another object may
     fall to the floor and the episode goes on. ``info`` carries
-    ``is_success``, ``achieved`` (per object), ``goal_index``,
+    ``is_success``, ``achieved`` (per object), ``lost`` (per object: the task can no longer hold for it, as
+    ``TaskDefinition.lost`` says), ``goal_index``,
     ``object_positions``, ``objects`` (``ObjectProps`` in observation order), ``instruction_text``,
     ``challenge`` (the ``Kind`` of misunderstanding of a correction episode, or ``None``) and ``correction``
     (``None`` until spoken).
@@ -165,6 +161,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._empty_slots = np.zeros((slots - objects) * OBJECT_SIZE)
         self._tokens = np.zeros(self.vocabulary.max_length, dtype=np.int64)
         self._achieved = np.zeros(objects, dtype=bool)
+        self._lost = np.zeros(objects, dtype=bool)
         self._steps = 0
         self._fell = False
         self._area_low = np.array(OBJECT_AREA.low[:2])
@@ -270,6 +267,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     # -- what the agent and the tools see --------------------------------------------------------------
 
     def _evaluate(self) -> np.ndarray:
+        """Per object, whether the task holds for it; records which objects it can no longer hold for."""
         states = self.objects.states()
         contacts = self.robot.contacts(self.objects.body_ids)
         view = TaskView(
@@ -280,6 +278,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             heights=self._heights,
             ee_position=self.robot.state().ee_position,
         )
+        self._lost = self.task.lost(view)
         return self.task.achieved(view)
 
     def _observation(self) -> dict[str, np.ndarray]:
@@ -314,6 +313,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "instruction_text": self.instructor.text,
             "challenge": self.instructor.challenge,
             "fell": self._fell,
+            "lost": self._lost.copy(),
             "correction": None if spoken is None else spoken.as_info(),
         }
 

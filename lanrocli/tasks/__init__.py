@@ -5,7 +5,7 @@ The built-in tasks are registered here, in the order whose indices replay buffer
 task's class goes at the end of ``BUILT_IN`` (docs/architecture.md, "add a task").
 """
 
-from lanrocli.tasks.base import ArmView, OracleMemory, TaskDefinition, TaskView
+from lanrocli.tasks.base import FALLEN, ArmView, OracleMemory, TaskDefinition, TaskView
 from lanrocli.tasks.grasp import Grasp
 from lanrocli.tasks.lift import Lift
 from lanrocli.tasks.push import Push
@@ -28,6 +28,7 @@ for _task in BUILT_IN:
 
 __all__ = [
     "BUILT_IN",
+    "FALLEN",
     "TASKS",
     "TASK_VERBS",
     "ArmView",

@@ -18,6 +18,11 @@ HOVER = 0.07
 ALIGNED = 0.012
 """Horizontal error (m) under which the oracle's hand counts as above its target."""
 
+FALLEN = -0.05
+"""An object whose centre is lower than this (m) has fallen off the table. The goal's fall ends the episode,
+lost; another object's does not: the arm can still do what it was asked, and a correction episode whose
+wrong object was pushed off while the instructor waited to speak is not lost for that."""
+
 
 @dataclass(frozen=True)
 class TaskView:
@@ -102,6 +107,12 @@ class TaskDefinition:
     def achieved(self, view: TaskView) -> np.ndarray:
         """Per object, whether the task is done on it in this state."""
         raise NotImplementedError
+
+    def lost(self, view: TaskView) -> np.ndarray:
+        """Per object, whether the task can no longer be done on it in this episode: it fell off the table.
+        A task whose condition asks more of the object (reach: that it was not knocked away) says so too;
+        the learner may then value such a state as failure for ever (``BufferSettings.lost_fails``)."""
+        return view.positions[:, 2] < FALLEN
 
     def oracle(self, view: ArmView, memory: OracleMemory) -> np.ndarray:
         """The scripted oracle's action for doing the task on ``view.target``."""

@@ -31,6 +31,11 @@ class Reach(TaskDefinition):
         touch = view.left_finger | view.right_finger
         return touch & (moved <= REACH_STILL)
 
+    def lost(self, view: TaskView) -> np.ndarray:
+        """An object knocked farther than ``REACH_STILL`` cannot be reached any more: nothing in the task
+        puts it back."""
+        return super().lost(view) | (np.linalg.norm(view.positions - view.start_positions, axis=1) > REACH_STILL)
+
     def oracle(self, view: ArmView, memory: OracleMemory) -> np.ndarray:
         ee, pos, top = view.ee_position, view.target_position, view.target_top
         if np.linalg.norm(ee[:2] - pos[:2]) > ALIGNED:

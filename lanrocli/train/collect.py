@@ -119,6 +119,7 @@ class TrainingEnv(gym.Wrapper):
             "objects": self._objects,
             "is_success": bool(info["is_success"]),
             "fell": bool(info["fell"]),
+            "lost": np.asarray(info["lost"], dtype=bool),
         }
 
 
@@ -138,6 +139,7 @@ class _Partial:
     terminated: list[bool] = field(default_factory=list)
     achieved: list[np.ndarray] = field(default_factory=list)
     fell: list[bool] = field(default_factory=list)
+    lost: list[np.ndarray] = field(default_factory=list)
 
     def episode(self, task: str) -> EpisodeData:
         return EpisodeData(
@@ -150,6 +152,7 @@ class _Partial:
             terminated=np.asarray(self.terminated, dtype=bool),
             achieved=np.stack(self.achieved),
             fell=np.asarray(self.fell, dtype=bool),
+            lost=np.stack(self.lost),
             goal_index=self.goal_index,
             objects=self.objects,
             task=task,
@@ -229,6 +232,8 @@ class Collector:
             p.terminated = list(map(bool, data["terminated"]))
             # Checkpoints written before falls were recorded: a fall ends its episode, so none is in a partial.
             p.fell = list(map(bool, data.get("fell", np.zeros(len(p.rewards), dtype=bool))))
+            # Checkpoints written before losses were recorded: read as nothing lost so far.
+            p.lost = list(data.get("lost", np.zeros((len(p.rewards), len(p.objects)), dtype=bool)))
 
     def partials(self) -> list[dict[str, np.ndarray]]:
         """Each environment's unfinished episode as arrays, for the checkpoint."""
@@ -253,6 +258,7 @@ class Collector:
                     "terminated": rows(p.terminated, bool),
                     "achieved": rows(p.achieved, bool, len(p.objects)),
                     "fell": rows(p.fell, bool),
+                    "lost": rows(p.lost, bool, len(p.objects)),
                 }
             )
         return out
@@ -285,6 +291,7 @@ class Collector:
             p.terminated.append(bool(terminated[i]))
             p.achieved.append(np.asarray(step_info["achieved"][i], dtype=bool))
             p.fell.append(bool(step_info["fell"][i]))
+            p.lost.append(np.asarray(step_info["lost"][i], dtype=bool))
             if ended:
                 success, scripted = bool(step_info["is_success"][i]), bool(step_info["scripted"][i])
                 finished.append(FinishedEpisode(p.episode(self.task), success, scripted))

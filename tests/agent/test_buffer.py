@@ -405,6 +405,35 @@ def test_falls_fail_marks_the_step_that_dropped_an_object_unless_it_won() -> Non
     assert batch.failed.any() and not (batch.failed & ~dropped_last).any() and batch.done[batch.failed].all()
 
 
+def test_lost_fails_marks_transitions_that_lose_the_object_their_sentence_is_about() -> None:
+    def lose_objects(i: int, episode: EpisodeData) -> None:
+        episode.lost = np.zeros_like(episode.achieved)
+        episode.lost[len(episode) // 2 :, i % episode.achieved.shape[1]] = True  # from halfway, one object
+
+    buffer, added = _filled(5000, 200, seed=11, edit=lose_objects)
+    rng = np.random.default_rng(11)
+    failed = 0
+    for lost_fails in (False, True):
+        batch = buffer.sample(1024, rng, relabel_ratio=0.5, lost_fails=lost_fails)
+        for row in range(1024):
+            episode, step = _origin(batch, row, added)
+            about = batch.named[row] if batch.relabelled[row] else episode.goal_index
+            won = batch.reward[row] == 0.0
+            assert batch.failed[row] == (lost_fails and bool(episode.lost[step, about]) and not won)
+            assert batch.done[row] == (won or batch.failed[row])
+            failed += int(batch.failed[row])
+    assert failed > 50
+    assert (batch.failed & batch.relabelled).any() and (batch.failed & ~batch.relabelled).any()
+
+
+def test_a_buffer_saved_before_losses_were_recorded_reads_as_nothing_lost() -> None:
+    buffer, _ = _filled(capacity=2000, episodes=60, seed=12)
+    meta, arrays = buffer.state()
+    loaded = ReplayBuffer.from_state({**meta, "format": 2}, {k: v for k, v in arrays.items() if k != "lost"})
+    assert not loaded.data["lost"].any()
+    assert not loaded.sample(256, np.random.default_rng(0), relabel_ratio=0.5, lost_fails=True).failed.any()
+
+
 CHAINS = grammar_vocabulary(2)
 
 

@@ -24,6 +24,7 @@ INFO_KEYS = {
     "challenge",
     "correction",
     "fell",
+    "lost",
 }
 
 
@@ -398,6 +399,21 @@ def test_the_goal_falling_off_the_table_truncates_the_episode_another_object_lan
     _, reward, terminated, truncated, info = env.step(np.zeros(3))
     assert truncated and not terminated and reward == -1.0 and info["object_positions"][goal, 2] < -0.1
     assert info["fell"]  # the learner tells this end from the time limit's
+    assert info["lost"].tolist() == [True, True]  # both off the table: no task can hold for either
+    env.close()
+
+
+def test_reach_reports_a_knocked_object_as_lost_and_goes_on() -> None:
+    env = LanroEnv("reach", objects=2)
+    _, info = env.reset(seed=0)
+    assert not info["lost"].any()
+    body = env.objects.body_ids[info["goal_index"]]
+    position = info["object_positions"][info["goal_index"]] + np.array([0.05, 0.0, 0.0])
+    env.world.client.resetBasePositionAndOrientation(body, position, (0.0, 0.0, 0.0, 1.0))
+    env.world.invalidate()
+    _, _, terminated, truncated, info = env.step(np.zeros(3))
+    assert info["lost"][info["goal_index"]] and not info["lost"][1 - info["goal_index"]]
+    assert not (terminated or truncated)  # lost, but only the learner is told: the episode runs on
     env.close()
 
 
