@@ -27,14 +27,12 @@ class Reach(TaskDefinition):
     verbs = ("reach", "touch", "contact")
 
     def achieved(self, view: TaskView) -> np.ndarray:
-        moved = np.linalg.norm(view.positions - view.start_positions, axis=1)
         touch = view.left_finger | view.right_finger
-        return touch & (moved <= REACH_STILL)
+        return touch & ~_knocked(view)
 
     def lost(self, view: TaskView) -> np.ndarray:
-        """An object knocked farther than ``REACH_STILL`` cannot be reached any more: nothing in the task
-        puts it back."""
-        return super().lost(view) | (np.linalg.norm(view.positions - view.start_positions, axis=1) > REACH_STILL)
+        """An object knocked away cannot be reached any more: nothing in the task puts it back."""
+        return super().lost(view) | _knocked(view)
 
     def oracle(self, view: ArmView, memory: OracleMemory) -> np.ndarray:
         ee, pos, top = view.ee_position, view.target_position, view.target_top
@@ -46,3 +44,8 @@ class Reach(TaskDefinition):
         # Fingertips sit FINGERTIP_DROP below the end effector: aim them a few millimetres into the top,
         # slowly, so the touch does not shove the object away.
         return 0.5 * view.towards(np.array([pos[0], pos[1], top + FINGERTIP_DROP - 0.004]))
+
+
+def _knocked(view: TaskView) -> np.ndarray:
+    """Per object, whether it lies farther than ``REACH_STILL`` from its start."""
+    return np.linalg.norm(view.positions - view.start_positions, axis=1) > REACH_STILL
