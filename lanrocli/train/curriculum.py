@@ -18,7 +18,7 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
-from lanrocli.agent.settings import MOVED
+from lanrocli.agent.settings import MOVED, BufferSettings
 from lanrocli.choices import Kind, Split, Task
 from lanrocli.envs.scene import check_scenes
 from lanrocli.train.overrides import apply_settings
@@ -191,6 +191,11 @@ class Curriculum(BaseModel):
     def evaluation(self, index: int) -> EvalConfig:
         """How stage ``index`` is evaluated: the curriculum's ``eval``, with the stage's own keys in place."""
         return self.stages[index].eval.over(self.eval)
+
+    def buffer_settings(self, index: int) -> BufferSettings:
+        """How stage ``index`` samples its batches: the curriculum's ``buffer``, with the stage's own keys in
+        place."""
+        return self.stages[index].buffer.over(self.buffer.settings())
 
     def to_yaml(self) -> str:
         """The resolved plan (``extends`` applied, defaults filled in), itself a loadable curriculum."""

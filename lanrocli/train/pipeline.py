@@ -266,7 +266,10 @@ class CurriculumRun:
 
     def _enter(self, index: int) -> None:
         evaluation = self.curriculum.evaluation(index)
-        self.trainer.enter_stage(self.curriculum.stages[index].env.settings(), index, evaluation.episodes, evaluation.correction_rate)
+        self.trainer.enter_stage(
+            self.curriculum.stages[index].env.settings(), index, evaluation.episodes, evaluation.correction_rate,
+            self.curriculum.buffer_settings(index),
+        )
 
     def _row(self, stage: Stage, report: EvaluationReport, value: float | None, holds: bool) -> dict[str, Any]:
         progress = self.trainer.progress
@@ -338,7 +341,7 @@ def _train_settings(curriculum: Curriculum) -> TrainSettings:
         eval_correction_rate=curriculum.evaluation(0).correction_rate,
         learning_starts=curriculum.learning_starts,
         updates_per_step=curriculum.updates_per_step,
-        buffer=curriculum.buffer.settings(),
+        buffer=curriculum.buffer_settings(0),
         object_slots=curriculum.max_objects,
         max_corrections=curriculum.max_corrections,
         stage=0,

@@ -142,6 +142,40 @@ class StageEval(BaseModel):
         return base.model_copy(update={key: value for key, value in self.model_dump().items() if value is not None})
 
 
+STAGE_BUFFER_KEYS = (
+    "relabel_ratio", "correction_share", "hindsight_share", "relabel_corrections", "relabel_negations",
+    "fresh_targets", "ground_real", "falls_fail", "lost_fails", "n_step",
+)
+"""The ``BufferSettings`` a stage may change: how batches are drawn and relabelled. The buffer's size and
+whether its sentence pools hold chains of corrections are fixed when the run's buffer is built."""
+
+
+class _StageBufferBase(BaseModel):
+    """A stage's sampling settings where they differ from the curriculum's ``buffer``: each key given
+    replaces the curriculum's for this stage alone, so a lever that would slow a curriculum's early stages
+    can be screened in its late ones, and with ``--from`` without training the early ones again."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    @field_validator("*")
+    @classmethod
+    def _key_accepted(cls, value: Any, info: ValidationInfo) -> Any:
+        if value is not None:
+            BufferSettings(**{info.field_name: value})
+        return value
+
+    def over(self, base: BufferSettings) -> BufferSettings:
+        """``base`` with this stage's keys in place of its own."""
+        return dataclasses.replace(base, **{key: value for key, value in self.model_dump().items() if value is not None})
+
+
+_BUFFER_HINTS = typing.get_type_hints(BufferSettings)
+StageBuffer = create_model(  # type: ignore[call-overload]
+    "StageBuffer", __base__=_StageBufferBase, __module__=__name__,
+    **{key: (_BUFFER_HINTS[key] | None, None) for key in STAGE_BUFFER_KEYS},
+)
+
+
 class Stage(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
@@ -154,6 +188,8 @@ class Stage(BaseModel):
     """What to do when the budget runs out before promotion: go on regardless, or end the curriculum."""
     eval: StageEval = Field(default_factory=StageEval)
     """This stage's own evaluation settings, where they differ from the curriculum's ``eval``."""
+    buffer: StageBuffer = Field(default_factory=StageBuffer)  # type: ignore[valid-type]
+    """This stage's own sampling settings, where they differ from the curriculum's ``buffer``."""
 
     @field_validator("promote")
     @classmethod

@@ -218,15 +218,14 @@ class Trainer:
             LanroEnv, s.task, env, object_slots=s.slots, vocabulary=self.vocabulary, holdout=s.holdout
         )
 
-    def enter_stage(self, env: EnvSettings, stage: int, eval_episodes: int, eval_correction_rate: float | None) -> None:
-        """Collect and evaluate with new environment and evaluation settings from now on. The old stage's
-        unfinished episodes are dropped: they were collected under a goal distribution that no longer holds,
-        and half an episode gives relabelling no future to look at."""
+    def enter_stage(self, env: EnvSettings, stage: int, eval_episodes: int, eval_rate: float | None, buffer: BufferSettings) -> None:
+        """Collect, sample and evaluate with new settings from now on. The old stage's unfinished episodes are
+        dropped: they were collected under a goal distribution that no longer holds, and half an episode gives
+        relabelling no future to look at."""
         self.close()
         self._restore = None
-        self.settings = dataclasses.replace(
-            self.settings, env=env, stage=stage, eval_episodes=eval_episodes, eval_correction_rate=eval_correction_rate
-        )
+        changes = {"env": env, "stage": stage, "eval_episodes": eval_episodes, "eval_correction_rate": eval_rate, "buffer": buffer}
+        self.settings = dataclasses.replace(self.settings, **changes)
         self.buffer.negations = env.negations or self.settings.buffer.relabel_negations
 
     # -- running -----------------------------------------------------------------------------------------

@@ -61,6 +61,11 @@ def test_a_variant_that_judges_its_last_stage_otherwise_branches_there(tmp_path:
     assert branch_point(load_curriculum(tiny(tmp_path)), load_curriculum(path)) == 2
 
 
+def test_a_variant_that_samples_its_last_stage_otherwise_branches_there(tmp_path: Path) -> None:
+    path = variant(tiny(tmp_path), tmp_path, THIRD, THIRD + "\n    buffer: {lost_fails: true}")
+    assert branch_point(load_curriculum(tiny(tmp_path)), load_curriculum(path)) == 2
+
+
 def test_the_same_curriculum_has_nothing_to_branch_into(tmp_path: Path) -> None:
     with pytest.raises(RunError, match="no stage after the run's first 3"):
         branch(load_curriculum(tiny(tmp_path)), source_folder(tmp_path), tmp_path / "new")

@@ -207,6 +207,21 @@ def test_a_stage_evaluation_replaces_the_curriculums_keys_it_gives_for_that_stag
     assert (problem.line, problem.path) == (9, "stages[1].eval.correction_rate") and "less than or equal" in problem.message
 
 
+def test_a_stage_buffer_replaces_the_curriculums_sampling_keys_it_gives_for_that_stage_alone(tmp_path: Path) -> None:
+    text = "buffer: {relabel_ratio: 0.5, size: 5000}\n" + MINIMAL + (
+        "  - name: second\n    budget: {steps: 1000}\n    buffer: {lost_fails: true, relabel_ratio: 0.8}\n"
+    )
+    curriculum = load_curriculum(write(tmp_path, "c.yaml", text))
+    assert curriculum.buffer_settings(0) == curriculum.buffer.settings()
+    second = curriculum.buffer_settings(1)
+    assert (second.lost_fails, second.relabel_ratio, second.size) == (True, 0.8, 5000)
+    assert load_curriculum(write(tmp_path, "d.yaml", curriculum.to_yaml())) == curriculum  # config.yaml round trip
+    problem = only_problem(write(tmp_path, "e.yaml", text.replace("relabel_ratio: 0.8", "relabel_ratio: 2")))
+    assert (problem.line, problem.path) == (9, "stages[1].buffer.relabel_ratio") and "[0, 1]" in problem.message
+    problem = only_problem(write(tmp_path, "f.yaml", text.replace("lost_fails: true", "size: 100")))
+    assert problem.path == "stages[1].buffer.size"  # the run's buffer is built once: a stage cannot resize it
+
+
 def test_a_second_mistake_needs_mistake_starts_and_chains(tmp_path: Path) -> None:
     text = MINIMAL + "    env: {objects: 3, correction_rate: 1, mistake_start: 0.5, second_mistake: 0.5}\n"
     problem = only_problem(write(tmp_path, "c.yaml", text))

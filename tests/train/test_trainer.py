@@ -153,10 +153,12 @@ def test_entering_a_stage_changes_the_environments_and_keeps_the_learning() -> N
     trainer = Trainer(settings, AGENT)
     trainer.run(60)
     updates, stored = trainer.progress.updates, trainer.buffer.size
-    trainer.enter_stage(EnvSettings(objects=3, correction_rate=0.5, negations=True), 1, 4, None)
+    buffer = dataclasses.replace(settings.buffer, lost_fails=True)
+    trainer.enter_stage(EnvSettings(objects=3, correction_rate=0.5, negations=True), 1, 4, None, buffer)
     trainer.run(200)
     trainer.close()
     assert trainer.progress.updates > updates and trainer.buffer.size > stored and trainer.buffer.negations
+    assert trainer.settings.buffer.lost_fails  # the stage's sampling, saved with the trainer's settings
     # The stage's limit: correction episodes get 100 steps.
     assert trainer.evaluate(first_seed=0, episodes=1).results[0].length <= 100
     three = trainer.buffer.data["objects"][: trainer.buffer.high, 2, 0] != 255
