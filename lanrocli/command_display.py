@@ -179,6 +179,9 @@ def print_plan(plan: Curriculum) -> None:
             if getattr(default, f.name) != getattr(settings, f.name)
         }
         console.print(f"{name}: default settings ({type(settings).__name__}){', except ' + str(changed) if changed else ''}")
+    for i, stage in enumerate(plan.stages):
+        if own_keys := {key: value for key, value in stage.buffer.model_dump().items() if value is not None}:
+            console.print(f"  stage {i + 1} ({stage.name}) samples with {own_keys}")
     console.print(f"{plan.updates_per_step:g} update(s) per environment step, from step {plan.learning_starts:,}")
 
 

@@ -264,6 +264,16 @@ def test_every_shipped_curriculum_checks(tmp_path) -> None:
         assert "environment steps in all" in result.output
 
 
+def test_check_names_the_stages_that_sample_otherwise() -> None:
+    from pathlib import Path
+
+    screen = Path(__file__).parents[1] / "benchmarks" / "screens" / "reach-lost-fails.yaml"
+    result = runner.invoke(app, ["check", str(screen)], terminal_width=200)
+    assert result.exit_code == 0, result.output
+    assert "stage 3 (negations) samples with {'lost_fails': True}" in result.output
+    assert "stage 2 (corrections) samples" not in result.output
+
+
 def test_quick_without_a_file_runs_quick_yaml_as_written_and_with_a_file_scales_it() -> None:
     from lanrocli.arguments import load_plan as _load_plan
     from lanrocli.train.curriculum import builtin_curriculum, load_curriculum
