@@ -380,50 +380,51 @@ def test_a_buffer_of_format_1_still_loads() -> None:
     assert np.array_equal(batch.label, batch.named)
 
 
-def test_falls_fail_marks_the_step_that_dropped_an_object_unless_it_won() -> None:
-    def drop_at_the_end(_: int, episode: EpisodeData) -> None:
-        if not episode.terminated[-1]:
-            episode.fell = np.zeros(len(episode), dtype=bool)
-            episode.fell[-1] = True  # the episode ended by dropping an object
+def _drop_at_the_end(_: int, episode: EpisodeData) -> None:
+    if not episode.terminated[-1]:
+        episode.fell = np.zeros(len(episode), dtype=bool)
+        episode.fell[-1] = True  # the episode ended by dropping an object
 
-    buffer, added = _filled(5000, 200, seed=10, edit=drop_at_the_end)
+
+def _lose_one_object_from_halfway(i: int, episode: EpisodeData) -> None:
+    episode.lost = np.zeros_like(episode.achieved)
+    episode.lost[len(episode) // 2 :, i % episode.achieved.shape[1]] = True
+
+
+def _dropped(episode: EpisodeData, step: int, _: int) -> bool:
+    return episode.fell is not None and bool(episode.fell[step])
+
+
+def _lost(episode: EpisodeData, step: int, about: int) -> bool:
+    return bool(episode.lost[step, about])
+
+
+@pytest.mark.parametrize(
+    ("setting", "edit", "ends"),
+    [("falls_fail", _drop_at_the_end, _dropped), ("lost_fails", _lose_one_object_from_halfway, _lost)],
+)
+def test_a_failure_setting_marks_its_transitions_failed_and_done_unless_they_won(setting: str, edit, ends) -> None:  # type: ignore[no-untyped-def]
+    """falls_fail: the step dropped an object; lost_fails: after it the object the sentence is about (the goal,
+    or the relabelled target) is lost. (A fall ends its episode, so no relabelled target is won later.)"""
+    buffer, added = _filled(5000, 200, seed=10, edit=edit)
     rng = np.random.default_rng(10)
-    failed = 0
-    for falls in (False, True):
-        batch = buffer.sample(1024, rng, relabel_ratio=0.5, falls_fail=falls)
-        for row in range(1024):
-            episode, step = _origin(batch, row, added)
-            dropped = episode.fell is not None and bool(episode.fell[step])
-            won = batch.reward[row] == 0.0
-            assert batch.failed[row] == (falls and dropped and not won)
-            if batch.failed[row]:
-                assert batch.done[row]
-                failed += 1
-    assert failed > 20
-    batch = buffer.sample(512, rng, relabel_ratio=0.5, falls_fail=True, n_step=3, gamma=0.9)
-    dropped_last = buffer.data["fell"][batch.slots + batch.steps - 1]
-    assert batch.failed.any() and not (batch.failed & ~dropped_last).any() and batch.done[batch.failed].all()
-
-
-def test_lost_fails_marks_transitions_that_lose_the_object_their_sentence_is_about() -> None:
-    def lose_objects(i: int, episode: EpisodeData) -> None:
-        episode.lost = np.zeros_like(episode.achieved)
-        episode.lost[len(episode) // 2 :, i % episode.achieved.shape[1]] = True  # from halfway, one object
-
-    buffer, added = _filled(5000, 200, seed=11, edit=lose_objects)
-    rng = np.random.default_rng(11)
-    failed = 0
-    for lost_fails in (False, True):
-        batch = buffer.sample(1024, rng, relabel_ratio=0.5, lost_fails=lost_fails)
+    failed = {True: 0, False: 0}  # by whether the transition was relabelled
+    for on in (False, True):
+        batch = buffer.sample(1024, rng, relabel_ratio=0.5, **{setting: on})
         for row in range(1024):
             episode, step = _origin(batch, row, added)
             about = batch.named[row] if batch.relabelled[row] else episode.goal_index
             won = batch.reward[row] == 0.0
-            assert batch.failed[row] == (lost_fails and bool(episode.lost[step, about]) and not won)
+            assert batch.failed[row] == (on and ends(episode, step, about) and not won)
             assert batch.done[row] == (won or batch.failed[row])
-            failed += int(batch.failed[row])
-    assert failed > 50
-    assert (batch.failed & batch.relabelled).any() and (batch.failed & ~batch.relabelled).any()
+            failed[bool(batch.relabelled[row])] += int(batch.failed[row])
+    assert failed[False] > 20 and (failed[True] > 20 or setting == "falls_fail")
+    batch = buffer.sample(512, rng, relabel_ratio=0.5, n_step=3, gamma=0.9, **{setting: True})
+    assert batch.failed.any() and batch.done[batch.failed].all()
+    for row in np.flatnonzero(batch.failed):  # judged at the last step the transition spans
+        episode, step = _origin(batch, row, added)
+        about = batch.named[row] if batch.relabelled[row] else episode.goal_index
+        assert ends(episode, step + int(batch.steps[row]) - 1, about)
 
 
 def test_a_buffer_saved_before_losses_were_recorded_reads_as_nothing_lost() -> None:
