@@ -34,7 +34,7 @@ def main() -> None:
         parser.error(f"--stage must be from 1 to {len(curriculum.stages)}, the stages of {args.curriculum}")
     settings = TrainSettings(
         task=curriculum.task, env=curriculum.stages[args.stage - 1].env.settings(), envs=2,
-        learning_starts=args.collect + 1, buffer=curriculum.buffer.settings(), object_slots=curriculum.max_objects,
+        learning_starts=args.collect + 1, buffer=curriculum.buffer_settings(args.stage - 1), object_slots=curriculum.max_objects,
         max_corrections=curriculum.max_corrections, stage=args.stage - 1,
     )
     trainer = Trainer(settings, curriculum.agent.settings())

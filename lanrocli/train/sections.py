@@ -1,7 +1,7 @@
 """The sections of a curriculum file under its top level: a stage with its budget and promotion rule, the
 evaluation, the test and the holdout; and the ``agent``, ``buffer`` and ``env`` sections, generated from the
 dataclasses that own those settings (``SACSettings``, ``BufferSettings``, ``EnvSettings``), so a new setting
-of either needs no change here. :mod:`lanrocli.train.curriculum` puts them together and checks them
+of either needs no change here (a sampling setting a stage may change is listed in ``STAGE_BUFFER_KEYS``). :mod:`lanrocli.train.curriculum` puts them together and checks them
 against each other. Like it, this loads neither torch nor pybullet."""
 
 from __future__ import annotations
@@ -146,8 +146,9 @@ STAGE_BUFFER_KEYS = (
     "relabel_ratio", "correction_share", "hindsight_share", "relabel_corrections", "relabel_negations",
     "fresh_targets", "ground_real", "falls_fail", "lost_fails", "n_step",
 )
-"""The ``BufferSettings`` a stage may change: how batches are drawn and relabelled. The buffer's size and
-whether its sentence pools hold chains of corrections are fixed when the run's buffer is built."""
+"""The ``BufferSettings`` a stage may change: how batches are drawn and relabelled (``relabel_negations``
+for the episodes stored from the stage on, whose sentence pools it fills). The buffer's size and whether its
+pools hold chains of corrections are fixed when the run's buffer is built."""
 
 
 class _StageBufferBase(BaseModel):

@@ -168,7 +168,7 @@ class Trainer:
     """Collects, learns and evaluates on one stage's environments; saves and loads all of its state.
 
     Agent, replay buffer, sampling generator and counters outlive a stage: :meth:`enter_stage` only
-    changes what the environments are, which is how a curriculum moves on.
+    changes what the environments are and how batches are sampled, which is how a curriculum moves on.
     """
 
     def __init__(

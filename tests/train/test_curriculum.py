@@ -222,6 +222,16 @@ def test_a_stage_buffer_replaces_the_curriculums_sampling_keys_it_gives_for_that
     assert problem.path == "stages[1].buffer.size"  # the run's buffer is built once: a stage cannot resize it
 
 
+def test_a_stage_may_change_every_sampling_setting_and_none_that_builds_the_buffer() -> None:
+    import dataclasses
+
+    from lanrocli.agent.settings import BufferSettings
+    from lanrocli.train.sections import STAGE_BUFFER_KEYS
+
+    fields = {f.name for f in dataclasses.fields(BufferSettings)}
+    assert set(STAGE_BUFFER_KEYS) == fields - {"size", "relabel_chains"}
+
+
 def test_a_second_mistake_needs_mistake_starts_and_chains(tmp_path: Path) -> None:
     text = MINIMAL + "    env: {objects: 3, correction_rate: 1, mistake_start: 0.5, second_mistake: 0.5}\n"
     problem = only_problem(write(tmp_path, "c.yaml", text))
