@@ -65,3 +65,25 @@ def test_scripted_episodes_are_learned_from_but_not_the_agents_training_success(
     trainer.close()
     assert trainer.progress.episodes >= 5 and trainer.buffer.size + unfinished == 100
     assert trainer.train_success is None
+
+
+def test_losses_are_kept_per_step_through_a_checkpoints_unfinished_episodes() -> None:
+    def reach() -> LanroEnv:
+        return LanroEnv("reach", settings=EnvSettings(objects=2, max_episode_steps=30))
+
+    collector = Collector(reach, 1, "reach", seed=3)
+    rng = np.random.default_rng(3)
+    for _ in range(12):  # random pushes, well into an episode
+        collector.step_async(rng.uniform(-1.0, 1.0, (1, 3)).astype(np.float32))
+        collector.step_wait()
+    saved = collector.partials()
+    collector.close()
+    lost = saved[0]["lost"]
+    assert lost.shape == saved[0]["achieved"].shape and lost.dtype == bool
+    restored = Collector(reach, 1, "reach", seed=3)
+    restored.restore_partials(saved)
+    assert np.array_equal(restored.partials()[0]["lost"], lost)
+    older = [{key: value for key, value in saved[0].items() if key != "lost"}]  # a checkpoint from before losses
+    restored.restore_partials(older)
+    assert not restored.partials()[0]["lost"].any() and restored.partials()[0]["lost"].shape == lost.shape
+    restored.close()
