@@ -48,9 +48,14 @@ class _KeyByKey(_Settings):
         return value
 
 
-def _section(settings_class: type, name: str, base: type[_Settings]) -> type[_Settings]:
+def _section(settings_class: type, name: str, base: type[BaseModel], keys: tuple[str, ...] | None = None) -> Any:
+    """A model with one optional key per field of ``settings_class``; with ``keys``, per field named there, each
+    ``None`` (absent) unless given: what a stage changes of a curriculum's section."""
     hints = typing.get_type_hints(settings_class)
-    fields = {f.name: (hints[f.name], f.default) for f in dataclasses.fields(settings_class)}
+    if keys is None:
+        fields = {f.name: (hints[f.name], f.default) for f in dataclasses.fields(settings_class)}
+    else:
+        fields = {key: (hints[key] | None, None) for key in keys}
     model = create_model(name, __base__=base, __module__=__name__, **fields)  # type: ignore[call-overload]
     model.settings_class = settings_class
     model.__doc__ = f"One optional key per field of ``{settings_class.__name__}``, generated from it."
@@ -157,12 +162,13 @@ class _StageBufferBase(BaseModel):
     can be screened in its late ones, and with ``--from`` without training the early ones again."""
 
     model_config = ConfigDict(extra="forbid")
+    settings_class: ClassVar[type]
 
     @field_validator("*")
     @classmethod
     def _key_accepted(cls, value: Any, info: ValidationInfo) -> Any:
         if value is not None:
-            BufferSettings(**{info.field_name: value})
+            cls.settings_class(**{info.field_name: value})
         return value
 
     def over(self, base: BufferSettings) -> BufferSettings:
@@ -170,11 +176,7 @@ class _StageBufferBase(BaseModel):
         return dataclasses.replace(base, **{key: value for key, value in self.model_dump().items() if value is not None})
 
 
-_BUFFER_HINTS = typing.get_type_hints(BufferSettings)
-StageBuffer = create_model(  # type: ignore[call-overload]
-    "StageBuffer", __base__=_StageBufferBase, __module__=__name__,
-    **{key: (_BUFFER_HINTS[key] | None, None) for key in STAGE_BUFFER_KEYS},
-)
+StageBuffer = _section(BufferSettings, "StageBuffer", _StageBufferBase, STAGE_BUFFER_KEYS)
 
 
 class Stage(BaseModel):
