@@ -15,8 +15,25 @@ import time
 import torch
 from torch.profiler import ProfilerActivity, profile
 
-from lanrocli.train.curriculum import find_curriculum, load_curriculum
+from lanrocli.agent.sac import SACAgent
+from lanrocli.agent.transitions import Batch
+from lanrocli.train.curriculum import Curriculum, find_curriculum, load_curriculum
 from lanrocli.train.trainer import Trainer, TrainSettings
+
+
+def record_batches(curriculum: Curriculum, stage: int, collect: int, count: int) -> tuple[SACAgent, list[Batch]]:
+    """The curriculum's agent after ``collect`` steps of its stage ``stage`` (from 1), untrained, and ``count``
+    batches sampled from what it collected, as that stage samples them."""
+    settings = TrainSettings(
+        task=curriculum.task, env=curriculum.stages[stage - 1].env.settings(), envs=2,
+        learning_starts=collect + 1, buffer=curriculum.buffer_settings(stage - 1), object_slots=curriculum.max_objects,
+        max_corrections=curriculum.max_corrections, stage=stage - 1,
+    )
+    trainer = Trainer(settings, curriculum.agent.settings())
+    trainer.run(collect)
+    trainer.close()
+    agent, rng, sampling = trainer.agent, trainer.rng, settings.buffer.sampling()
+    return agent, [trainer.buffer.sample(agent.settings.batch_size, rng, **sampling, gamma=agent.settings.gamma) for _ in range(count)]
 
 
 def main() -> None:
@@ -32,19 +49,7 @@ def main() -> None:
     curriculum = load_curriculum(find_curriculum(args.curriculum))
     if not 1 <= args.stage <= len(curriculum.stages):
         parser.error(f"--stage must be from 1 to {len(curriculum.stages)}, the stages of {args.curriculum}")
-    settings = TrainSettings(
-        task=curriculum.task, env=curriculum.stages[args.stage - 1].env.settings(), envs=2,
-        learning_starts=args.collect + 1, buffer=curriculum.buffer_settings(args.stage - 1), object_slots=curriculum.max_objects,
-        max_corrections=curriculum.max_corrections, stage=args.stage - 1,
-    )
-    trainer = Trainer(settings, curriculum.agent.settings())
-    trainer.run(args.collect)
-    trainer.close()
-    agent, rng, sampling = trainer.agent, trainer.rng, settings.buffer.sampling()
-    batches = [
-        trainer.buffer.sample(agent.settings.batch_size, rng, **sampling, gamma=agent.settings.gamma)
-        for _ in range(args.updates)
-    ]
+    agent, batches = record_batches(curriculum, args.stage, args.collect, args.updates)
     for batch in batches[:10]:  # warm-up
         agent.update(batch)
     start = time.perf_counter()
