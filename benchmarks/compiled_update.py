@@ -25,6 +25,7 @@ import argparse
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -101,7 +102,7 @@ def losses(agent: SACAgent, inputs: dict[str, torch.Tensor], encoders: list[tupl
     return total, torch.stack(metrics)
 
 
-def compiled_update(agent: SACAgent, compiled, batch: Batch) -> list[float]:
+def compiled_update(agent: SACAgent, compiled: Callable[..., tuple[torch.Tensor, torch.Tensor]], batch: Batch) -> list[float]:
     """One update of ``agent`` with the compiled losses: as ``SACAgent.update``, but for the losses' form."""
     def tensor(array: np.ndarray, dtype: torch.dtype) -> torch.Tensor:
         return torch.as_tensor(np.asarray(array), device=agent.device).to(dtype)
