@@ -11,6 +11,9 @@ chains of corrections; everything below then counts from the second) into:
 - *fell short*: it failed without knocking the goal; the closest the end effector came to the goal object
   after the correction is reported (median), to tell "went elsewhere" from "stopped near".
 
+It says what touched the goal in the few steps before it first moved farther than reach allows: the arm,
+another object (one the arm pushed into it), or both; and whether that was before the correction or after.
+
 It also says which object was knocked first (moved more than 2.5 cm), and whether before or after the
 correction: in reach, leaving a touched wrong object by dragging it is the typical first slip. In grasp and
 lift, where what an object has achieved is its being held (or raised), it also says how many failures held
@@ -68,6 +71,7 @@ class Outcome:
     forms: str  # the forms of the corrections spoken up to it, first to last: "negation, excuse"
     goal_knocked_at_correction: bool  # the goal already more than 2.5 cm from its start when it was spoken
     shortcut: str | None  # a negation among three objects: is the object least like the one ruled out the goal?
+    goal_pushed_by: str | None  # what touched the goal in the steps before it first moved 2.5 cm (``PUSHERS``)
 
 
 def _shortcut(objects: tuple[ObjectProps, ...], goal: int, ruled_out: int) -> str:
@@ -81,6 +85,22 @@ def _shortcut(objects: tuple[ObjectProps, ...], goal: int, ruled_out: int) -> st
         return (a.colour == b.colour) + (a.shape == b.shape)
 
     return "tie" if shared(goal) == shared(other) else "agrees" if shared(goal) < shared(other) else "disagrees"
+
+
+PUSHERS = ("the arm", "another object", "the arm and another object", "nothing seen")
+"""What touched the goal in the last ``PUSH_STEPS`` steps before it first moved farther than reach allows: the
+robot, another object (one the arm pushed into it), both, or neither (contacts are read after each step)."""
+
+PUSH_STEPS = 3
+
+
+def _touching_goal(env: LanroEnv, goal: int) -> tuple[bool, bool]:
+    """Whether the robot, and whether another object, touches the goal after the last step."""
+    bodies = env.objects.body_ids
+    robot = bool(env.robot.contacts([bodies[goal]]).robot[0])
+    client = env.world.client
+    other = any(client.getContactPoints(bodyA=bodies[goal], bodyB=body) for k, body in enumerate(bodies) if k != goal)
+    return robot, other
 
 
 WENT = ("the goal", "back to the object corrected", "back to an object corrected earlier",
@@ -111,6 +131,8 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int, nth: int = 1) -> Outcome 
     achieved = np.zeros_like(info["achieved"])
     reached: tuple[list[int], list[int]] = ([], [])  # objects whose condition came to hold: before, after
     forms: list[str] = []
+    touches: list[tuple[bool, bool]] = []
+    pushed_by = None
     while not done:
         obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
         done = terminated or truncated
@@ -131,6 +153,10 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int, nth: int = 1) -> Outcome 
         achieved = info["achieved"]
         if spoken:
             closest = min(closest, float(np.linalg.norm(positions[goal] - obs["observation"][:3])))
+        touches.append(_touching_goal(env, goal))
+        if pushed_by is None and moved[goal] > REACH_STILL:
+            robot, other = (any(t[i] for t in touches[-PUSH_STEPS:]) for i in (0, 1))
+            pushed_by = PUSHERS[2] if robot and other else PUSHERS[0] if robot else PUSHERS[1] if other else PUSHERS[3]
         if first_knock is None and np.any(moved > REACH_STILL):
             which = "the goal" if int(np.argmax(moved)) == goal else "another object"
             first_knock = f"{which}, {'after' if spoken else 'before'} the correction"
@@ -146,7 +172,7 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int, nth: int = 1) -> Outcome 
         result = "fell short"
     went = _went(goal, *reached, others_achieved)
     return Outcome(result, closest, first_knock, held_at_correction, others_achieved, went, ", ".join(forms[:nth]),
-                   knocked_at_correction, shortcut)
+                   knocked_at_correction, shortcut, pushed_by)
 
 
 def main() -> None:
@@ -211,6 +237,13 @@ def main() -> None:
     print("first object knocked, in the failures:")
     for knock, count in knocks.most_common():
         print(f"  {knock:<36} {count:>4}")
+    print(f"what touched the goal in the {PUSH_STEPS} steps before it first moved {REACH_STILL * 100:g} cm, in the "
+          "failures with the goal knocked (before the correction / after it):")
+    moved_goal = [o for o in spoken if o.result != "succeeded" and o.goal_pushed_by is not None]
+    for pusher in PUSHERS:
+        before = sum(o.goal_pushed_by == pusher and o.goal_knocked_at_correction for o in moved_goal)
+        after = sum(o.goal_pushed_by == pusher and not o.goal_knocked_at_correction for o in moved_goal)
+        print(f"  {pusher:<36} {before:>4} / {after}")
     if task_class(settings.task).gripper:
         holding = [o for o in spoken if o.held_other_at_correction]
         won = sum(o.result == "succeeded" for o in holding)
