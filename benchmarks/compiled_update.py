@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
+from recorded_batches import batch_arguments, record_batches
 
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.transitions import Batch
@@ -134,10 +135,7 @@ def compiled_update(agent: SACAgent, compiled: Callable[..., tuple[torch.Tensor,
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--curriculum", default="reach", help="whose agent settings (a packaged name or a file)")
-    parser.add_argument("--stage", type=int, default=3, help="whose environment collects the batches (from 1)")
-    parser.add_argument("--collect", type=int, default=1500)
-    parser.add_argument("--updates", type=int, default=100)
+    batch_arguments(parser, stage=3, updates=100)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--mode", default=None, help="torch.compile's mode (reduce-overhead: CUDA graphs)")
@@ -151,11 +149,7 @@ def main() -> None:
         eager = SACAgent.from_state_dict(recorded["agent"], args.device)
         batches = [Batch(**{name: value.numpy() for name, value in batch.items()}) for batch in recorded["batches"]]
     else:
-        from update_profile import record_batches  # needs PyBullet, to collect
-
-        from lanrocli.train.curriculum import find_curriculum, load_curriculum
-
-        eager, batches = record_batches(load_curriculum(find_curriculum(args.curriculum)), args.stage, args.collect, args.updates)
+        eager, batches = record_batches(args, parser)
         if args.save is not None:
             arrays = [{name: torch.as_tensor(value) for name, value in dataclasses.asdict(b).items()} for b in batches]
             torch.save({"agent": eager.state_dict(), "batches": arrays}, args.save)

@@ -15,41 +15,17 @@ import time
 import torch
 from torch.profiler import ProfilerActivity, profile
 
-from lanrocli.agent.sac import SACAgent
-from lanrocli.agent.transitions import Batch
-from lanrocli.train.curriculum import Curriculum, find_curriculum, load_curriculum
-from lanrocli.train.trainer import Trainer, TrainSettings
-
-
-def record_batches(curriculum: Curriculum, stage: int, collect: int, count: int) -> tuple[SACAgent, list[Batch]]:
-    """The curriculum's agent after ``collect`` steps of its stage ``stage`` (from 1), untrained, and ``count``
-    batches sampled from what it collected, as that stage samples them."""
-    settings = TrainSettings(
-        task=curriculum.task, env=curriculum.stages[stage - 1].env.settings(), envs=2,
-        learning_starts=collect + 1, buffer=curriculum.buffer_settings(stage - 1), object_slots=curriculum.max_objects,
-        max_corrections=curriculum.max_corrections, stage=stage - 1,
-    )
-    trainer = Trainer(settings, curriculum.agent.settings())
-    trainer.run(collect)
-    trainer.close()
-    agent, rng, sampling = trainer.agent, trainer.rng, settings.buffer.sampling()
-    return agent, [trainer.buffer.sample(agent.settings.batch_size, rng, **sampling, gamma=agent.settings.gamma) for _ in range(count)]
+from recorded_batches import batch_arguments, record_batches
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--curriculum", default="reach", help="whose agent settings (a packaged name or a file)")
-    parser.add_argument("--stage", type=int, default=1, help="whose environment collects the batches (from 1)")
-    parser.add_argument("--collect", type=int, default=1500)
-    parser.add_argument("--updates", type=int, default=200)
+    batch_arguments(parser, stage=1, updates=200)
     parser.add_argument("--top", type=int, default=15)
     args = parser.parse_args()
     torch.set_num_threads(1)
 
-    curriculum = load_curriculum(find_curriculum(args.curriculum))
-    if not 1 <= args.stage <= len(curriculum.stages):
-        parser.error(f"--stage must be from 1 to {len(curriculum.stages)}, the stages of {args.curriculum}")
-    agent, batches = record_batches(curriculum, args.stage, args.collect, args.updates)
+    agent, batches = record_batches(args, parser)
     for batch in batches[:10]:  # warm-up
         agent.update(batch)
     start = time.perf_counter()
