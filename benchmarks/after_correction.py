@@ -92,6 +92,8 @@ PUSHERS = ("the arm", "another object", "the arm and another object", "nothing s
 robot, another object (one the arm pushed into it), both, or neither (contacts are read after each step)."""
 
 PUSH_STEPS = 3
+"""Steps looked back from the goal's move: a push builds up over a few steps, and contacts are read only once
+per step."""
 
 
 def _touching_goal(env: LanroEnv, goal: int) -> tuple[bool, bool]:

@@ -23,14 +23,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from recorded_batches import batch_arguments, record_batches
 
 from lanrocli.agent.sac import SACAgent
@@ -56,13 +54,6 @@ def read_all(tables: torch.Tensor, w_hh: torch.Tensor, b_hh: torch.Tensor, token
     return h
 
 
-def squashed(mean: torch.Tensor, log_std: torch.Tensor, noise: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """``Actor.sample``'s action and log-probability, with the noise given."""
-    u = mean + log_std.exp() * noise
-    gaussian = (-0.5 * noise.pow(2) - log_std - 0.5 * math.log(2 * math.pi)).sum(1)
-    return torch.tanh(u), gaussian - (2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))).sum(1)
-
-
 def losses(agent: SACAgent, inputs: dict[str, torch.Tensor], encoders: list[tuple[torch.Tensor, ...]]) -> tuple[torch.Tensor, torch.Tensor]:
     """``SACAgent.update``'s summed loss and its metrics, in fixed shapes (for an agent with its own actor
     encoder and object-wise readers, as the shipped curricula's)."""
@@ -74,7 +65,9 @@ def losses(agent: SACAgent, inputs: dict[str, torch.Tensor], encoders: list[tupl
     critic_language, next_target_language = summaries[0, :batch], summaries[2, batch:].detach()
     actor_language, next_actor_language = summaries[1].chunk(2)
     with torch.no_grad():
-        next_action, next_log_prob = squashed(*actor(inputs["next_obs"], next_actor_language, inputs["next_present"]), inputs["next_noise"])
+        next_action, next_log_prob = actor.sample(
+            inputs["next_obs"], next_actor_language, None, inputs["next_present"], noise=inputs["next_noise"]
+        )
         next_q = agent.target_critic(inputs["next_obs"], next_target_language, next_action, inputs["next_present"])
         target_q = inputs["reward"] + inputs["discount"] * inputs["not_done"] * (next_q.min(dim=0).values - alpha * next_log_prob)
         target_q = target_q + inputs["discount"] * inputs["failed"] * (FAILURE_REWARD / (1.0 - s.gamma))
@@ -85,7 +78,7 @@ def losses(agent: SACAgent, inputs: dict[str, torch.Tensor], encoders: list[tupl
     observed = critic.observe(obs, critic_language, present, critic_scores)
     q = critic.value(observed, inputs["action"])
     critic_loss = (q - target_q).pow(2).mean(dim=1).sum()
-    pi_action, log_prob = squashed(*actor(obs, actor_language, present, actor_scores), inputs["noise"])
+    pi_action, log_prob = actor.sample(obs, actor_language, None, present, actor_scores, noise=inputs["noise"])
     first = critic.body[0]
     h = torch.baddbmm(observed.detach(), pi_action.expand(critic.n_critics, -1, -1), first.weight[:, -critic.action_dim :].detach())
     for layer in [*critic.body[1:], critic.q]:

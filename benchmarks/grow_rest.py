@@ -39,8 +39,8 @@ def zero_padded(tensor: torch.Tensor, axis: int, size: int) -> torch.Tensor:
     return torch.cat([tensor, tensor.new_zeros(shape)], dim=axis)
 
 
-def grown(state: dict) -> dict:
-    """An agent state with ``see_rest`` on, acting and valuing as ``state`` does."""
+def grown(state: dict, agent: SACAgent) -> dict:
+    """An agent state with ``see_rest`` on, acting and valuing as ``state`` does (``agent``: built from it)."""
     if state["settings"]["see_rest"] or state["layout"] is None:
         raise SystemExit("the run's agent already sees the rest, or reads no objects (architecture flat)")
     extra = state["layout"]["object"]
@@ -48,7 +48,6 @@ def grown(state: dict) -> dict:
     for name, network, axis in GROWN:
         out[network] = dict(state[network], **{name: zero_padded(state[network][name], axis, extra)})
     # Adam's moments are kept per parameter, numbered as the optimiser's groups list them: critic, then actor.
-    agent = SACAgent.from_state_dict(state)
     numbered = [*[f"critic.{n}" for n, _ in agent.critic.named_parameters()], *[f"actor.{n}" for n, _ in agent.actor.named_parameters()]]
     moments = {index: dict(values) for index, values in state["optimizer"]["state"].items()}
     for name, network, axis in GROWN:
@@ -78,9 +77,9 @@ def main() -> None:
         shutil.copytree(args.run / name, args.out / name, symlinks=True)
     last = read_pointer(args.out / stages[1] / LAST)
     checkpoint = load_checkpoint(last)
-    state = grown(checkpoint.agent)
-
-    before, after = SACAgent.from_state_dict(checkpoint.agent), SACAgent.from_state_dict(state)
+    before = SACAgent.from_state_dict(checkpoint.agent)
+    state = grown(checkpoint.agent, before)
+    after = SACAgent.from_state_dict(state)
     rng = np.random.default_rng(0)
     probe = {"observation": rng.normal(size=(64, before.obs_dim)).astype(np.float32),
              "instruction": rng.integers(1, before.vocab_size, size=(64, 16))}

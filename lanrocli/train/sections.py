@@ -1,8 +1,9 @@
 """The sections of a curriculum file under its top level: a stage with its budget and promotion rule, the
 evaluation, the test and the holdout; and the ``agent``, ``buffer`` and ``env`` sections, generated from the
 dataclasses that own those settings (``SACSettings``, ``BufferSettings``, ``EnvSettings``), so a new setting
-of either needs no change here (a sampling setting a stage may change is listed in ``STAGE_BUFFER_KEYS``). :mod:`lanrocli.train.curriculum` puts them together and checks them
-against each other. Like it, this loads neither torch nor pybullet."""
+of either needs no change here (a sampling setting a stage may change is listed in ``STAGE_BUFFER_KEYS``).
+:mod:`lanrocli.train.curriculum` puts them together and checks them against each other. Like it, this loads
+neither torch nor pybullet."""
 
 from __future__ import annotations
 

@@ -24,7 +24,7 @@ from lanrocli.train.curriculum import (
     load_curriculum,
     packaged_curricula,
 )
-from lanrocli.train.sections import EnvConfig
+from lanrocli.train.sections import STAGE_BUFFER_KEYS, EnvConfig
 
 MINIMAL = """\
 name: demo
@@ -223,11 +223,6 @@ def test_a_stage_buffer_replaces_the_curriculums_sampling_keys_it_gives_for_that
 
 
 def test_a_stage_may_change_every_sampling_setting_and_none_that_builds_the_buffer() -> None:
-    import dataclasses
-
-    from lanrocli.agent.settings import BufferSettings
-    from lanrocli.train.sections import STAGE_BUFFER_KEYS
-
     fields = {f.name for f in dataclasses.fields(BufferSettings)}
     assert set(STAGE_BUFFER_KEYS) == fields - {"size", "relabel_chains"}
 
