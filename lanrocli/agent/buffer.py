@@ -211,6 +211,7 @@ class ReplayBuffer:
         ground_real: bool = False,
         falls_fail: bool = False,
         lost_fails: bool = False,
+        knock_cost: float = 0.0,
     ) -> Batch:
         """``batch_size`` transitions drawn with replacement: a share ``hindsight_share`` (binomially) from
         the transitions whose episode achieves the task on an identifiable object at that step or later, the
@@ -236,7 +237,7 @@ class ReplayBuffer:
         learner is to value what follows as failure for ever, not as the time limit it otherwise resembles.
         ``lost_fails``: likewise where the transition's last step left the object its sentence is about (the
         goal, or the relabelled target) where the task can no longer hold for it (``TaskDefinition.lost``),
-        and did not win.
+        and did not win. ``knock_cost``: subtracted from the reward for each step that leaves an object lost.
 
         With ``n_step`` above 1 each transition spans up to ``n_step`` stored steps of its episode (fewer where
         the episode ends first, or where its goal, the relabelled one included, is achieved first): see
@@ -247,10 +248,8 @@ class ReplayBuffer:
         if n_step < 1:
             raise ValueError(f"n_step must be at least 1, got {n_step}")
         idx = self._draw(batch_size, rng, hindsight_share)
-        return sampled_batch(
-            self.data, idx, rng, self.pool_rows, relabel_ratio, correction_share, n_step, gamma, fresh_targets,
-            ground_real, falls_fail, lost_fails,
-        )
+        return sampled_batch(self.data, idx, rng, self.pool_rows, relabel_ratio, correction_share, n_step, gamma,
+                             fresh_targets, ground_real, falls_fail, lost_fails, knock_cost)
 
     def _draw(self, batch_size: int, rng: np.random.Generator, hindsight_share: float) -> np.ndarray:
         if hindsight_share == 0.0:

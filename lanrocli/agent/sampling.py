@@ -23,6 +23,7 @@ def sampled_batch(
     ground_real: bool,
     falls_fail: bool,
     lost_fails: bool,
+    knock_cost: float,
 ) -> Batch:
     """The transitions stored at the slots ``idx``, relabelled and extended as :meth:`ReplayBuffer.sample`
     was asked."""
@@ -81,6 +82,8 @@ def sampled_batch(
     if n_step > 1:
         _extend(data, batch, relabel, target, n_step, gamma)
     final = batch.slots + batch.steps - 1
+    if knock_cost:
+        batch.reward -= np.float32(knock_cost) * _knocks(data, batch.slots, batch.steps, gamma)
     if falls_fail:
         batch.failed |= data["fell"][final] & ~batch.done
     if lost_fails:
@@ -88,6 +91,18 @@ def sampled_batch(
         batch.failed |= data["lost"][final, about] & ~batch.done
     batch.done = batch.done | batch.failed
     return batch
+
+
+def _knocks(data: dict[str, np.ndarray], slots: np.ndarray, steps: np.ndarray, gamma: float) -> np.ndarray:
+    """Per transition, its steps at which some object became lost (it was not after the step before, nor at
+    the episode's start), each discounted by ``gamma`` to the power of its place in the transition."""
+    offsets = np.arange(int(steps.max()))
+    at = np.minimum(slots[:, None] + offsets, (slots + steps - 1)[:, None])  # an episode's steps are contiguous
+    before = np.where(
+        (data["episode_start"][at] == at)[..., None], False, data["lost"][np.maximum(at - 1, 0)]
+    )
+    knocked = (data["lost"][at] & ~before).any(axis=-1)
+    return np.where(offsets < steps[:, None], knocked * gamma**offsets, 0.0).sum(axis=1).astype(np.float32)
 
 
 def _touched(

@@ -178,6 +178,12 @@ class BufferSettings:
     for good, as ``falls_fail`` does a fall. Reach needs it where falls do not: a goal knocked away on the
     arm's way to a wrong object is lost though the episode runs on, and only the critic's bootstrap, over
     the rest of the episode, would otherwise learn that."""
+    knock_cost: float = 0.0
+    """Subtracted from a transition's reward for each step it spans that leaves an object newly lost
+    (``TaskDefinition.lost``: fallen; for reach, knocked farther than it may move), whatever its sentence
+    is about. Reach loses a goal knocked on the arm's way between objects, which the arm, attending to
+    one object, cannot see; a cost on every knock asks it to travel clear of all of them. The targets'
+    floor stays the failure's return, so the cost is cut off only where values already sit there."""
     n_step: int = 1
     """Bellman targets over this many stored steps (n-step returns), cut at the episode's end and at its
     goal's success: a sparse success reaches the states that led to it in 1/n of the updates. 1 is the
@@ -188,6 +194,8 @@ class BufferSettings:
             raise ValueError(f"n_step must be a number of steps from 1 to 100, got {self.n_step}")
         if not 1 <= self.size < 2**31:
             raise ValueError(f"size must be a positive number of transitions below 2**31, got {self.size}")
+        if not self.knock_cost >= 0.0:
+            raise ValueError(f"knock_cost must be a reward of 0 or more to subtract, got {self.knock_cost}")
         for name in ("relabel_ratio", "correction_share", "hindsight_share"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
@@ -204,4 +212,5 @@ class BufferSettings:
             "ground_real": self.ground_real,
             "falls_fail": self.falls_fail,
             "lost_fails": self.lost_fails,
+            "knock_cost": self.knock_cost,
         }

@@ -427,6 +427,31 @@ def test_a_failure_setting_marks_its_transitions_failed_and_done_unless_they_won
         assert ends(episode, step + int(batch.steps[row]) - 1, about)
 
 
+def _lose_two_objects(i: int, episode: EpisodeData) -> None:
+    _lose_one_object_from_halfway(i, episode)
+    episode.lost[3 * len(episode) // 4 :, (i + 1) % episode.achieved.shape[1]] = True
+
+
+@pytest.mark.parametrize("n_step", [1, 3])
+def test_knock_cost_is_paid_once_for_each_step_that_leaves_an_object_lost(n_step: int) -> None:
+    """Whatever the transition's sentence is about, and discounted along an n-step transition; the draws and
+    everything else in the batch are those of the same sample without the cost."""
+    buffer, added = _filled(5000, 200, seed=13, edit=_lose_two_objects)
+    free = buffer.sample(1024, np.random.default_rng(3), relabel_ratio=0.5, n_step=n_step, gamma=0.9)
+    paid = buffer.sample(1024, np.random.default_rng(3), relabel_ratio=0.5, n_step=n_step, gamma=0.9, knock_cost=2.0)
+    assert np.array_equal(free.slots, paid.slots) and np.array_equal(free.done, paid.done)
+    charged = 0
+    for row in range(1024):
+        episode, step = _origin(free, row, added)
+        lost = np.vstack([np.zeros_like(episode.lost[:1]), episode.lost])
+        knocked = (lost[1:] & ~lost[:-1]).any(axis=1)
+        spanned = range(step, step + int(free.steps[row]))
+        cost = 2.0 * sum(0.9 ** (t - step) for t in spanned if knocked[t])
+        assert free.reward[row] - paid.reward[row] == pytest.approx(cost, abs=1e-5)
+        charged += cost > 0
+    assert charged > 20
+
+
 def test_a_buffer_saved_before_losses_were_recorded_reads_as_nothing_lost() -> None:
     buffer, _ = _filled(capacity=2000, episodes=60, seed=12)
     meta, arrays = buffer.state()
