@@ -98,9 +98,7 @@ def _knocks(data: dict[str, np.ndarray], slots: np.ndarray, steps: np.ndarray, g
     the episode's start), each discounted by ``gamma`` to the power of its place in the transition."""
     offsets = np.arange(int(steps.max()))
     at = np.minimum(slots[:, None] + offsets, (slots + steps - 1)[:, None])  # an episode's steps are contiguous
-    before = np.where(
-        (data["episode_start"][at] == at)[..., None], False, data["lost"][np.maximum(at - 1, 0)]
-    )
+    before = np.where((data["episode_start"][at] == at)[..., None], False, data["lost"][np.maximum(at - 1, 0)])
     knocked = (data["lost"][at] & ~before).any(axis=-1)
     return np.where(offsets < steps[:, None], knocked * gamma**offsets, 0.0).sum(axis=1).astype(np.float32)
 
