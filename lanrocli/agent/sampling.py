@@ -41,8 +41,7 @@ def sampled_batch(
         step = data["achieving_slot"][data["future_first"][rows] + rng.integers(0, data["future_count"][rows])]
         candidates = data["achieved"][step] & data["identifiable"][step]
         if fresh_targets:
-            at_start = data["episode_start"][rows] == rows
-            candidates &= ~(data["achieved"][np.maximum(rows - 1, 0)] & ~at_start[:, None])
+            candidates &= ~_step_before(data, "achieved", rows)
         found = candidates.any(axis=1)
         relabel[relabel] = found
         rows, candidates = rows[found], candidates[found]
@@ -93,13 +92,18 @@ def sampled_batch(
     return batch
 
 
+def _step_before(data: dict[str, np.ndarray], name: str, slots: np.ndarray) -> np.ndarray:
+    """The per-object flags ``data[name]`` after the step before each slot's; none at an episode's first step."""
+    first = data["episode_start"][slots] == slots
+    return data[name][np.maximum(slots - 1, 0)] & ~first[..., None]
+
+
 def _knocks(data: dict[str, np.ndarray], slots: np.ndarray, steps: np.ndarray, gamma: float) -> np.ndarray:
     """Per transition, its steps at which some object became lost (it was not after the step before, nor at
     the episode's start), each discounted by ``gamma`` to the power of its place in the transition."""
     offsets = np.arange(int(steps.max()))
     at = np.minimum(slots[:, None] + offsets, (slots + steps - 1)[:, None])  # an episode's steps are contiguous
-    before = np.where((data["episode_start"][at] == at)[..., None], False, data["lost"][np.maximum(at - 1, 0)])
-    knocked = (data["lost"][at] & ~before).any(axis=-1)
+    knocked = (data["lost"][at] & ~_step_before(data, "lost", at)).any(axis=-1)
     return np.where(offsets < steps[:, None], knocked * gamma**offsets, 0.0).sum(axis=1).astype(np.float32)
 
 
