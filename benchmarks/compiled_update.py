@@ -1,19 +1,18 @@
-"""Whether ``torch.compile`` makes the shipped agent's update faster on CPU: an experiment, not the update
-``lanro`` trains with.
+"""How much ``torch.compile`` makes the shipped agent's update faster on CPU, compiled two ways, timed against
+``SACAgent.update`` eager on the same recorded batches, alternating rounds:
 
-``SACAgent.update`` changes shape from batch to batch (the number of distinct sentences, the longest one), so
-compiling it recompiles without end. Here every shape is fixed: all of a batch's sentences are read (none
-deduplicated) over the vocabulary's full sentence length with a mask, the policy's noise is drawn outside,
-the critic judges the policy's action through detached weights instead of a frozen module, and the
-grounding loss is a masked sum. The losses are compiled whole (forward and backward, inductor); the
-optimiser step and the target's update stay eager, as in ``SACAgent.update``. The script times it against
-``SACAgent.update`` on the same recorded batches, alternating rounds:
+- ``compile: true`` (``SACSettings.compile``, what ``lanro`` trains with when asked): the losses after the
+  sentences' reading (:func:`lanrocli.agent.losses.sac_losses`), whose shapes never change, compiled; the
+  sentences read eagerly, each distinct one once, packed by length.
+- whole (an experiment): the sentences' reading compiled too. Its shapes change from batch to batch (the
+  number of distinct sentences, the longest one), so here they are fixed: all of a batch's sentences are
+  read, none deduplicated, over the vocabulary's full sentence length with a mask.
 
     python benchmarks/compiled_update.py --stage 3 --updates 100 --rounds 3
 
 On a GPU an update of this size is bound by kernel launches (docs/performance.md), which CUDA graphs
-remove, and fixed shapes are what a graph needs: ``--device cuda --mode reduce-overhead`` times that. A
-machine without PyBullet can time batches recorded on one with it:
+remove, and fixed shapes are what a graph needs: ``--device cuda --mode reduce-overhead`` times the whole
+update that way. A machine without PyBullet can time batches recorded on one with it:
 
     python benchmarks/compiled_update.py --stage 3 --updates 100 --save recorded.pt
     python benchmarks/compiled_update.py --load recorded.pt --device cuda --mode reduce-overhead
@@ -25,16 +24,17 @@ import argparse
 import dataclasses
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
-import numpy as np
 import torch
-from recorded_batches import batch_arguments, record_batches
+from recorded_batches import batch_arguments, compiled_twin, record_batches
 
+from lanrocli.agent.losses import UpdateTensors, sac_losses
 from lanrocli.agent.sac import SACAgent
+from lanrocli.agent.settings import UPDATE_METRICS
 from lanrocli.agent.transitions import Batch
 from lanrocli.language import PAD_ID
-from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 
 
 def read_all(tables: torch.Tensor, w_hh: torch.Tensor, b_hh: torch.Tensor, tokens: torch.Tensor) -> torch.Tensor:
@@ -54,76 +54,25 @@ def read_all(tables: torch.Tensor, w_hh: torch.Tensor, b_hh: torch.Tensor, token
     return h
 
 
-def losses(agent: SACAgent, inputs: dict[str, torch.Tensor], encoders: list[tuple[torch.Tensor, ...]]) -> tuple[torch.Tensor, torch.Tensor]:
-    """``SACAgent.update``'s summed loss and its metrics, in fixed shapes (for an agent with its own actor
-    encoder and object-wise readers, as the shipped curricula's)."""
-    s, actor, critic = agent.settings, agent.actor, agent.critic
-    alpha = agent.log_alpha.detach().exp()
-    tables = torch.stack([torch.addmm(b_ih, words, w_ih.t()) for words, w_ih, b_ih, _, _ in encoders])
-    summaries = read_all(tables, torch.stack([e[3] for e in encoders]), torch.stack([e[4] for e in encoders]), inputs["tokens"])
-    batch = inputs["reward"].shape[0]
-    critic_language, next_target_language = summaries[0, :batch], summaries[2, batch:].detach()
-    actor_language, next_actor_language = summaries[1].chunk(2)
-    with torch.no_grad():
-        next_action, next_log_prob = actor.sample(
-            inputs["next_obs"], next_actor_language, None, inputs["next_present"], noise=inputs["next_noise"]
-        )
-        next_q = agent.target_critic(inputs["next_obs"], next_target_language, next_action, inputs["next_present"])
-        target_q = inputs["reward"] + inputs["discount"] * inputs["not_done"] * (next_q.min(dim=0).values - alpha * next_log_prob)
-        target_q = target_q + inputs["discount"] * inputs["failed"] * (FAILURE_REWARD / (1.0 - s.gamma))
-        target_q = target_q.clamp(FAILURE_REWARD / (1.0 - s.gamma), SUCCESS_REWARD)
-    obs, present = inputs["obs"], inputs["present"]
-    critic_scores = critic.reader.scores(obs, critic_language, present)
-    actor_scores = actor.reader.scores(obs, actor_language, present)
-    observed = critic.observe(obs, critic_language, present, critic_scores)
-    q = critic.value(observed, inputs["action"])
-    critic_loss = (q - target_q).pow(2).mean(dim=1).sum()
-    pi_action, log_prob = actor.sample(obs, actor_language, None, present, actor_scores, noise=inputs["noise"])
-    first = critic.body[0]
-    h = torch.baddbmm(observed.detach(), pi_action.expand(critic.n_critics, -1, -1), first.weight[:, -critic.action_dim :].detach())
-    for layer in [*critic.body[1:], critic.q]:
-        h = torch.relu(h) if isinstance(layer, torch.nn.ReLU) else torch.baddbmm(layer.bias.detach(), h, layer.weight.detach())
-    actor_loss = (alpha * log_prob - h.squeeze(2).min(dim=0).values).mean()
-    label = inputs["label"]
-    labelled = (label >= 0).to(obs.dtype)
-    grounding_loss = obs.new_zeros(())
-    for scores in (critic_scores, actor_scores):
-        chosen = scores.log_softmax(-1).gather(2, label.clamp(min=0).expand(scores.shape[0], -1).unsqueeze(-1)).squeeze(-1)
-        grounding_loss = grounding_loss - (chosen * labelled).sum() / (labelled.sum().clamp(min=1) * scores.shape[0])
-    alpha_loss = -(agent.log_alpha * (log_prob.detach() + agent.target_entropy)).mean()
-    total = critic_loss + actor_loss + alpha_loss + s.grounding * grounding_loss
-    metrics = [critic_loss, actor_loss, alpha_loss, grounding_loss, alpha, q.mean(), target_q.mean(), -log_prob.mean()]
-    return total, torch.stack(metrics)
+def whole_losses(
+    agent: SACAgent, tensors: UpdateTensors, tokens: torch.Tensor, labelled: bool
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``SACAgent.update``'s summed loss and its metrics, the sentences read in fixed shapes: every sentence
+    over the vocabulary's full length (for an agent with its own actor encoder, as the shipped curricula's)."""
+    encoders = agent._update_encoders()
+    tables = torch.stack([torch.addmm(e.gru.bias_ih_l0, e.embedding.weight, e.gru.weight_ih_l0.t()) for e in encoders])
+    weight_hh = torch.stack([e.gru.weight_hh_l0 for e in encoders])
+    bias_hh = torch.stack([e.gru.bias_hh_l0 for e in encoders])
+    return sac_losses(agent, read_all(tables, weight_hh, bias_hh, tokens), tensors, labelled)
 
 
-def compiled_update(agent: SACAgent, compiled: Callable[..., tuple[torch.Tensor, torch.Tensor]], batch: Batch) -> list[float]:
-    """One update of ``agent`` with the compiled losses: as ``SACAgent.update``, but for the losses' form."""
-    def tensor(array: np.ndarray, dtype: torch.dtype) -> torch.Tensor:
-        return torch.as_tensor(np.asarray(array), device=agent.device).to(dtype)
-
-    raw, next_raw = tensor(batch.obs, torch.float32), tensor(batch.next_obs, torch.float32)
-    rows, actions = raw.shape[0], agent.action_dim
-    inputs = {
-        "obs": agent.normalizer(raw), "present": agent.layout.present(raw),
-        "next_obs": agent.normalizer(next_raw), "next_present": agent.layout.present(next_raw),
-        "tokens": torch.cat([tensor(batch.instruction, torch.int64), tensor(batch.next_instruction, torch.int64)]),
-        "action": tensor(batch.action, torch.float32), "reward": tensor(batch.reward, torch.float32),
-        "not_done": 1.0 - tensor(batch.done, torch.float32), "discount": agent.settings.gamma ** tensor(batch.steps, torch.float32),
-        "failed": tensor(batch.failed, torch.float32), "label": tensor(batch.label, torch.int64),
-        "next_noise": torch.randn(rows, actions, generator=agent.generator, device=agent.device),
-        "noise": torch.randn(rows, actions, generator=agent.generator, device=agent.device),
-    }
-    encoders = [
-        (e.embedding.weight, e.gru.weight_ih_l0, e.gru.bias_ih_l0, e.gru.weight_hh_l0, e.gru.bias_hh_l0)
-        for e in (agent.critic.encoder, agent.actor.encoder, agent.target_critic.encoder)
-    ]
-    total, metrics = compiled(agent, inputs, encoders)
-    agent.optimizer.zero_grad(set_to_none=True)
-    total.backward()
-    agent.optimizer.step()
-    with torch.no_grad():
-        torch._foreach_lerp_(list(agent.target_critic.parameters()), list(agent.critic.parameters()), 1.0 - agent.settings.polyak)
-    return metrics.tolist()
+def whole_update(agent: SACAgent, compiled: Callable[..., tuple[torch.Tensor, torch.Tensor]], batch: Batch) -> dict[str, float]:
+    """One update of ``agent`` with the losses compiled whole: as ``SACAgent.update``, but for the sentences'
+    reading."""
+    tensors, tokens = agent._update_inputs(batch)
+    loss, metrics = compiled(agent, tensors, tokens, bool((batch.label >= 0).any()))
+    agent._step(loss)
+    return dict(zip(UPDATE_METRICS, metrics.tolist()))
 
 
 def main() -> None:
@@ -151,28 +100,29 @@ def main() -> None:
             eager = SACAgent.from_state_dict(eager.state_dict(), args.device)
     if eager.actor.encoder is None or eager.actor.reader is None:
         parser.error("the experiment is written for an object-wise agent with its own actor encoder (reach.yaml's)")
-    agent = SACAgent.from_state_dict(eager.state_dict(), args.device)
-    compiled = torch.compile(losses, dynamic=False, mode=args.mode)
-    start = time.perf_counter()
-    ours = compiled_update(agent, compiled, batches[0])
-    print(f"compiling: {time.perf_counter() - start:.1f} s")
-    theirs = list(eager.update(batches[0]).values())  # the same agent, noise and batch: the same losses
-    gap = max(abs(a - b) / max(abs(b), 1e-6) for a, b in zip(ours, theirs))
-    print(f"first update's losses and metrics against SACAgent.update's: largest relative difference {gap:.1e}")
-    for batch in batches[:5]:  # warm-up
-        compiled_update(agent, compiled, batch)
-        eager.update(batch)
+    losses_compiled = compiled_twin(eager)
+    whole = SACAgent.from_state_dict(eager.state_dict(), args.device)
+    compiled = torch.compile(whole_losses, dynamic=False, mode=args.mode)
+    theirs = list(SACAgent.from_state_dict(eager.state_dict(), args.device).update(batches[0]).values())
+    for name, update in (("compile: true", losses_compiled.update), ("whole", partial(whole_update, whole, compiled))):
+        start = time.perf_counter()
+        ours = list(update(batches[0]).values())
+        gap = max(abs(a - b) / max(abs(b), 1e-6) for a, b in zip(ours, theirs))  # the same agent, noise and batch
+        print(f"{name}: compiling {time.perf_counter() - start:.1f} s; the first update's losses and metrics "
+              f"against SACAgent.update's: largest relative difference {gap:.1e}")
+    updates = {"eager": eager.update, "compile: true": losses_compiled.update, "whole": partial(whole_update, whole, compiled)}
+    for update in updates.values():  # warm-up
+        for batch in batches[:5]:
+            update(batch)
     for round_ in range(1, args.rounds + 1):
-        start = time.perf_counter()
-        for batch in batches:
-            eager.update(batch)
-        eager_ms = (time.perf_counter() - start) / len(batches) * 1000
-        start = time.perf_counter()
-        for batch in batches:
-            compiled_update(agent, compiled, batch)
-        compiled_ms = (time.perf_counter() - start) / len(batches) * 1000
-        print(f"round {round_}: eager {eager_ms:.2f} ms, compiled {compiled_ms:.2f} ms per update, eager / compiled {eager_ms / compiled_ms:.2f}")
-
+        times = {}
+        for name, update in updates.items():
+            start = time.perf_counter()
+            for batch in batches:
+                update(batch)
+            times[name] = (time.perf_counter() - start) / len(batches) * 1000
+        print(f"round {round_}: ms per update " + ", ".join(f"{name} {ms:.2f}" for name, ms in times.items())
+              + "; eager / compiled " + ", ".join(f"{name} {times['eager'] / ms:.2f}" for name, ms in times.items() if name != "eager"))
 
 if __name__ == "__main__":
     main()

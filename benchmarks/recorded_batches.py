@@ -39,3 +39,10 @@ def record_batches(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
     agent, rng, sampling = trainer.agent, trainer.rng, settings.buffer.sampling()
     size = agent.settings.batch_size
     return agent, [trainer.buffer.sample(size, rng, **sampling, gamma=agent.settings.gamma) for _ in range(args.updates)]
+
+
+def compiled_twin(agent: SACAgent) -> SACAgent:
+    """The same agent (weights, optimiser, noise stream), its update's losses compiled (``SACSettings.compile``)."""
+    state = agent.state_dict()
+    state["settings"] = {**state["settings"], "compile": True}
+    return SACAgent.from_state_dict(state, agent.device)

@@ -19,7 +19,6 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -131,19 +130,17 @@ class SceneReader(nn.Module):
 
 
 def attention_loss(
-    critic_scores: torch.Tensor | None, actor_scores: torch.Tensor | None, label: np.ndarray, weight: float, device: torch.device
+    critic_scores: torch.Tensor | None, actor_scores: torch.Tensor | None, label: torch.Tensor, labelled: bool, weight: float
 ) -> torch.Tensor:
     """The grounding loss: cross-entropy of the actor's and each critic's attention (logits [members, B,
-    slots]) against the object that a transition's sentence names (``label``, -1 where none is known); zero
-    without object-wise readers, a weight of 0 or labelled transitions, so that it costs nothing then."""
-    rows = torch.as_tensor(np.flatnonzero(label >= 0), device=device)
-    if critic_scores is None or actor_scores is None or weight == 0.0 or rows.numel() == 0:
-        return torch.zeros((), device=device)
-    named = torch.as_tensor(np.asarray(label), device=device).to(torch.int64)[rows]
-    loss = torch.zeros((), device=device)
+    slots]) against the object that a transition's sentence names (``label`` [B], -1 where none is known),
+    averaged over the labelled rows; zero without object-wise readers, a weight of 0 or a labelled row
+    (``labelled``, known to the caller without reading ``label``), so that it costs nothing then."""
+    if critic_scores is None or actor_scores is None or weight == 0.0 or not labelled:
+        return torch.zeros((), device=label.device)
+    loss = torch.zeros((), device=label.device)
     for scores in (critic_scores, actor_scores):
-        chosen = scores[:, rows]  # [members, rows, slots]
-        loss = loss + F.cross_entropy(chosen.flatten(0, 1), named.repeat(chosen.shape[0]))
+        loss = loss + F.cross_entropy(scores.flatten(0, 1), label.repeat(scores.shape[0]), ignore_index=-1)
     return loss
 
 
@@ -305,12 +302,18 @@ class Critic(nn.Module):
         state = torch.cat([observed, language.expand(self.n_critics, -1, -1)], dim=2) if self.sentence_in_trunk else observed
         return torch.baddbmm(first.bias, state, first.weight[:, : -self.action_dim])
 
-    def value(self, observed: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-        """Q values [n_critics, B] of ``action`` in the states :meth:`observe` read as ``observed``."""
-        first = self._first_layer()
-        h = torch.baddbmm(observed, action.expand(self.n_critics, -1, -1), first.weight[:, -self.action_dim :])
+    def value(self, observed: torch.Tensor, action: torch.Tensor, frozen: bool = False) -> torch.Tensor:
+        """Q values [n_critics, B] of ``action`` in the states :meth:`observe` read as ``observed``. ``frozen``:
+        the weights read as constants, so that the values' gradient reaches ``action`` and ``observed`` alone
+        (how the actor's loss judges the policy's action without training the critic)."""
+
+        def weights(layer: EnsembleLinear) -> tuple[torch.Tensor, torch.Tensor]:
+            return (layer.weight.detach(), layer.bias.detach()) if frozen else (layer.weight, layer.bias)
+
+        h = torch.baddbmm(observed, action.expand(self.n_critics, -1, -1), weights(self._first_layer())[0][:, -self.action_dim :])
         if len(self.body) > 0:  # the first layer was the body's; the rest of the body and the output follow
-            h = self.q(self.body[1:](h))
+            for layer in [*self.body[1:], self.q]:
+                h = torch.baddbmm(weights(layer)[1], h, weights(layer)[0]) if isinstance(layer, EnsembleLinear) else layer(h)
         return h.squeeze(2)
 
     def _first_layer(self) -> EnsembleLinear:

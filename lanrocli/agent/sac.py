@@ -16,12 +16,12 @@ from torch import nn
 from lanrocli.agent.buffer import ReplayBuffer
 from lanrocli.agent.encoder import LanguageEncoder, encode
 from lanrocli.agent.noise import restore_generator
-from lanrocli.agent.networks import Actor, Critic, ObjectLayout, attention_loss
+from lanrocli.agent.losses import UpdateTensors, compiled_losses, sac_losses
+from lanrocli.agent.networks import Actor, Critic, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
 from lanrocli.agent.transitions import Batch
 from lanrocli.choices import ActingAttention
-from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 
 _FORMAT = 1
 
@@ -97,6 +97,7 @@ class SACAgent:
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(noise_seed)
         self.updates = 0
+        self._losses = compiled_losses() if s.compile else sac_losses
 
     def _learning_rates(self) -> list[float]:
         """Per parameter group of the optimiser: critic, actor, then the temperature when it is tuned."""
@@ -161,67 +162,45 @@ class SACAgent:
     # -- learning ------------------------------------------------------------------------------------------
 
     def update(self, batch: Batch) -> dict[str, float]:
-        """One SAC update of critic, actor and temperature on ``batch``, then of the target critic.
-
-        All three losses are computed from the parameters as they are before the update, as the original
-        SAC does; they touch disjoint parameters, so one backward pass gives every network its gradient.
-        """
-        s = self.settings
-        obs, present = self._observe(batch.obs)
-        next_obs, next_present = self._observe(batch.next_obs)
-        tokens = self._tensor(batch.instruction, torch.int64)
-        next_tokens = self._tensor(batch.next_instruction, torch.int64)
-        action = self._tensor(batch.action, torch.float32)
-        reward = self._tensor(batch.reward, torch.float32)
-        not_done = 1.0 - self._tensor(batch.done, torch.float32)
-        discount = s.gamma ** self._tensor(batch.steps, torch.float32)
-        alpha = self.log_alpha.detach().exp()
-
+        """One SAC update of critic, actor and temperature on ``batch`` (:func:`~lanrocli.agent.losses.sac_losses`),
+        then of the target critic."""
+        tensors, tokens = self._update_inputs(batch)
         # The critic's, the actor's and the target critic's encoders read this and the next sentences (they
-        # nearly always coincide) in one pass. A shared encoder learns from the critic's loss alone: the actor
-        # reads its summary detached.
-        own_encoder = self.actor.encoder is not None
-        encoders = [self.critic.encoder, *([self.actor.encoder] if own_encoder else []), self.target_critic.encoder]
-        summaries = encode(encoders, torch.cat([tokens, next_tokens]))
-        critic_language = summaries[0, : tokens.shape[0]]
-        next_target_language = summaries[-1, tokens.shape[0] :].detach()
-        actor_language, next_actor_language = (summaries[1] if own_encoder else summaries[0].detach()).chunk(2)
+        # nearly always coincide) in one pass.
+        summaries = encode(self._update_encoders(), tokens)
+        loss, metrics = self._losses(self, summaries, tensors, bool((batch.label >= 0).any()))
+        self._step(loss)
+        return dict(zip(UPDATE_METRICS, metrics.tolist()))
 
-        # Critic: regress on the soft Bellman target of the target critic and the current policy.
-        with torch.no_grad():
-            next_action, next_log_prob = self.actor.sample(next_obs, next_actor_language, self.generator, next_present)
-            next_q = self.target_critic(next_obs, next_target_language, next_action, next_present)
-            target_q = reward + discount * not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
-            if batch.failed.any():  # a lost episode (an object dropped) is worth failing for ever
-                target_q = target_q + discount * self._tensor(batch.failed, torch.float32) * (FAILURE_REWARD / (1.0 - s.gamma))
-            if s.clip_target:
-                target_q = target_q.clamp(FAILURE_REWARD / (1.0 - s.gamma), SUCCESS_REWARD)
-        # Object-wise readers weigh the objects once per network: the same attention serves the networks and
-        # the grounding loss.
-        critic_scores = actor_scores = None
-        if self.critic.reader is not None and self.actor.reader is not None:
-            critic_scores = self.critic.reader.scores(obs, critic_language, present)
-            actor_scores = self.actor.reader.scores(obs, actor_language, present)
-        observed = self.critic.observe(obs, critic_language, present, critic_scores)
-        q = self.critic.value(observed, action)
-        critic_loss = (q - target_q).pow(2).mean(dim=1).sum()
+    def _update_inputs(self, batch: Batch) -> tuple[UpdateTensors, torch.Tensor]:
+        """The batch as the losses read it, and its sentences followed by its next sentences (int64 [2B, L])."""
+        s = self.settings
+        both, present = self._observe(np.concatenate([batch.obs, batch.next_obs]))  # one pass: row by row alike
+        obs, next_obs = both.chunk(2)
+        present, next_present = (None, None) if present is None else present.chunk(2)
+        # The policy's noise, the next states' first, from the agent's stream: drawn here, the losses are a
+        # function of tensors alone.
+        next_noise, noise = (torch.randn(obs.shape[0], self.action_dim, generator=self.generator, device=self.device) for _ in range(2))
+        tensors = UpdateTensors(
+            obs=obs, present=present, next_obs=next_obs, next_present=next_present,
+            action=self._tensor(batch.action, torch.float32), reward=self._tensor(batch.reward, torch.float32),
+            not_done=1.0 - self._tensor(batch.done, torch.float32), discount=s.gamma ** self._tensor(batch.steps, torch.float32),
+            failed=self._tensor(batch.failed, torch.float32), label=self._tensor(batch.label, torch.int64),
+            noise=noise, next_noise=next_noise,
+        )
+        return tensors, self._tensor(np.concatenate([batch.instruction, batch.next_instruction]), torch.int64)
 
-        # Actor: maximise the critic's value plus entropy. The critic judges the policy's actions in the states
-        # it has just read (detached) and is frozen meanwhile, so this loss sends gradient to the actor only.
-        pi_action, log_prob = self.actor.sample(obs, actor_language, self.generator, present, actor_scores)
-        self.critic.requires_grad_(False)
-        q_pi = self.critic.value(observed.detach(), pi_action).min(dim=0).values
-        self.critic.requires_grad_(True)
-        actor_loss = (alpha * log_prob - q_pi).mean()
+    def _update_encoders(self) -> list[LanguageEncoder]:
+        """The encoders an update reads the sentences with, in the order :func:`sac_losses` takes their
+        summaries: the critic's, the actor's own (if it has one), the target critic's."""
+        return [self.critic.encoder, *([self.actor.encoder] if self.actor.encoder is not None else []), self.target_critic.encoder]
 
-        grounding_loss = attention_loss(critic_scores, actor_scores, batch.label, s.grounding, self.device)
-
-        # Temperature: raise alpha when the policy's entropy falls below the target, lower it above. (Without
-        # tuning, log_alpha has no gradient and this loss is only reported.)
-        alpha_loss = -(self.log_alpha * (log_prob.detach() + self.target_entropy)).mean()
-
+    def _step(self, loss: torch.Tensor) -> None:
+        """Every network's gradient from one backward pass of ``loss``, the optimiser's step, then the target
+        critic's."""
+        s = self.settings
         self.optimizer.zero_grad(set_to_none=True)
-        (critic_loss + actor_loss + alpha_loss + s.grounding * grounding_loss).backward()
+        loss.backward()
         if s.max_grad_norm is not None:
             nn.utils.clip_grad_norm_(self.critic.parameters(), s.max_grad_norm)
             nn.utils.clip_grad_norm_(self.actor.parameters(), s.max_grad_norm)
@@ -229,11 +208,6 @@ class SACAgent:
         with torch.no_grad():
             torch._foreach_lerp_(list(self.target_critic.parameters()), list(self.critic.parameters()), 1.0 - s.polyak)
         self.updates += 1
-
-        with torch.no_grad():
-            losses = [critic_loss, actor_loss, alpha_loss, grounding_loss]
-            metrics = torch.stack([*losses, alpha, q.mean(), target_q.mean(), -log_prob.mean()]).tolist()
-        return dict(zip(UPDATE_METRICS, metrics))
 
     def learn(
         self,

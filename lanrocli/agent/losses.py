@@ -1,0 +1,116 @@
+"""The losses of one SAC update, as one function of tensors: the algorithm's arithmetic read top to bottom.
+
+:meth:`SACAgent.update <lanrocli.agent.sac.SACAgent.update>` turns a batch into tensors, draws the policy's
+noise and reads the sentences (:func:`~lanrocli.agent.encoder.encode`, whose length-sorted packing changes
+shape from batch to batch); everything after that has the same shapes in every update. So this function can
+be compiled whole (``SACSettings.compile``), forward and backward, while the encoders stay as they are.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, NamedTuple
+
+import torch
+
+from lanrocli.agent.networks import attention_loss
+from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
+
+if TYPE_CHECKING:
+    from lanrocli.agent.sac import SACAgent
+
+
+class UpdateTensors(NamedTuple):
+    """A batch as the losses read it, rows of transitions: observations normalised, ``present`` the object
+    slots that hold objects (None for a flat agent), ``discount`` gamma to the number of steps a transition
+    spans, ``label`` the object its sentence names (-1 where none is known), ``noise`` and ``next_noise``
+    the standard normal draws of the policy's actions in this and the next states."""
+
+    obs: torch.Tensor
+    present: torch.Tensor | None
+    next_obs: torch.Tensor
+    next_present: torch.Tensor | None
+    action: torch.Tensor
+    reward: torch.Tensor
+    not_done: torch.Tensor
+    discount: torch.Tensor
+    failed: torch.Tensor
+    label: torch.Tensor
+    noise: torch.Tensor
+    next_noise: torch.Tensor
+
+
+def sac_losses(agent: SACAgent, summaries: torch.Tensor, batch: UpdateTensors, labelled: bool) -> tuple[torch.Tensor, torch.Tensor]:
+    """The sum of the critic's, the actor's, the temperature's and the grounding loss, and the update's
+    metrics in :data:`~lanrocli.agent.settings.UPDATE_METRICS`' order.
+
+    ``summaries`` [encoders, 2B, size]: the critic's, the actor's (unless it shares the critic's) and the
+    target critic's readings of this (first B rows) and the next sentences. ``labelled``: whether any row
+    has a ``label``. All losses are computed from the parameters as they are before the update, as the
+    original SAC does; they touch disjoint parameters, so one backward pass of the sum gives every network
+    its gradient.
+    """
+    s, actor, critic = agent.settings, agent.actor, agent.critic
+    rows = batch.reward.shape[0]
+    alpha = agent.log_alpha.detach().exp()
+    critic_language = summaries[0, :rows]
+    next_target_language = summaries[-1, rows:].detach()
+    # A shared encoder learns from the critic's loss alone: the actor reads its summary detached.
+    actor_language, next_actor_language = (summaries[1] if actor.encoder is not None else summaries[0].detach()).chunk(2)
+
+    # Critic: regress on the soft Bellman target of the target critic and the current policy.
+    with torch.no_grad():
+        next_action, next_log_prob = actor.sample(
+            batch.next_obs, next_actor_language, None, batch.next_present, noise=batch.next_noise
+        )
+        next_q = agent.target_critic(batch.next_obs, next_target_language, next_action, batch.next_present)
+        target_q = batch.reward + batch.discount * batch.not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
+        # A lost episode (an object dropped) is worth failing for ever.
+        target_q = target_q + batch.discount * batch.failed * (FAILURE_REWARD / (1.0 - s.gamma))
+        if s.clip_target:
+            target_q = target_q.clamp(FAILURE_REWARD / (1.0 - s.gamma), SUCCESS_REWARD)
+    # Object-wise readers weigh the objects once per network: the same attention serves the networks and the
+    # grounding loss.
+    critic_scores = actor_scores = None
+    if critic.reader is not None and actor.reader is not None:
+        critic_scores = critic.reader.scores(batch.obs, critic_language, batch.present)
+        actor_scores = actor.reader.scores(batch.obs, actor_language, batch.present)
+    observed = critic.observe(batch.obs, critic_language, batch.present, critic_scores)
+    q = critic.value(observed, batch.action)
+    critic_loss = (q - target_q).pow(2).mean(dim=1).sum()
+
+    # Actor: maximise the critic's value plus entropy. The critic judges the policy's actions in the states it
+    # has just read, both held constant, so this loss sends gradient to the actor only.
+    pi_action, log_prob = actor.sample(batch.obs, actor_language, None, batch.present, actor_scores, noise=batch.noise)
+    q_pi = critic.value(observed.detach(), pi_action, frozen=True).min(dim=0).values
+    actor_loss = (alpha * log_prob - q_pi).mean()
+
+    grounding_loss = attention_loss(critic_scores, actor_scores, batch.label, labelled, s.grounding)
+
+    # Temperature: raise alpha when the policy's entropy falls below the target, lower it above. (Without
+    # tuning, log_alpha has no gradient and this loss is only reported.)
+    alpha_loss = -(agent.log_alpha * (log_prob.detach() + agent.target_entropy)).mean()
+
+    total = critic_loss + actor_loss + alpha_loss + s.grounding * grounding_loss
+    metrics = [critic_loss, actor_loss, alpha_loss, grounding_loss, alpha, q.mean(), target_q.mean(), -log_prob.mean()]
+    return total, torch.stack([metric.detach() for metric in metrics])
+
+
+Losses = Callable[["SACAgent", torch.Tensor, UpdateTensors, bool], tuple[torch.Tensor, torch.Tensor]]
+
+
+def compiled_losses() -> Losses:
+    """:func:`sac_losses` compiled for one agent, which must be the only one ever passed to it.
+
+    Its entries are kept apart from any other agent's (``isolate_recompiles``), and they skip the guards on
+    the networks' modules: an agent's modules never change after it is built (its parameters change in place),
+    and checking them took a few per cent of every update. Shapes are fixed (``dynamic=False``): an agent's
+    batches all have the same size; a changed setting (a stage's gamma) or a batch without labels compiles
+    another entry.
+    """
+    return torch.compile(
+        sac_losses,
+        dynamic=False,
+        isolate_recompiles=True,
+        options={"guard_filter_fn": torch.compiler.skip_guard_on_all_nn_modules_unsafe},
+    )
