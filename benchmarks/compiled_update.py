@@ -122,7 +122,7 @@ def main() -> None:
                 update(batch)
             times[name] = (time.perf_counter() - start) / len(batches) * 1000
         print(f"round {round_}: ms per update " + ", ".join(f"{name} {ms:.2f}" for name, ms in times.items())
-              + "; eager / compiled " + ", ".join(f"{name} {times['eager'] / ms:.2f}" for name, ms in times.items() if name != "eager"))
+              + "; " + ", ".join(f"eager / {name} {times['eager'] / ms:.2f}" for name, ms in times.items() if name != "eager"))
 
 if __name__ == "__main__":
     main()

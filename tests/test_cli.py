@@ -374,6 +374,17 @@ def test_train_on_a_device_this_machine_cannot_serve_is_a_clear_error(tmp_path: 
     assert not out.exists(), "the device is checked before the run folder is made"
 
 
+def test_train_with_a_compiled_update_and_no_cpp_compiler_is_a_clear_error(tmp_path: Path) -> None:
+    import torch._inductor.config
+
+    out = tmp_path / "run"
+    with torch._inductor.config.patch({"cpp.cxx": (None, str(tmp_path / "no-such-g++"))}):
+        result = runner.invoke(app, ["train", "--quick", "--out", str(out), "--set", "agent.compile=true", "--device", "cpu"])
+    assert result.exit_code == 2, result.output
+    assert "error:" in result.output and "C++ compiler" in result.output and "Traceback" not in result.output
+    assert not out.exists(), "the compiler is looked for before the run folder is made"
+
+
 def test_eval_acting_attention_is_recorded_and_refused_where_nothing_attends(
     untrained_checkpoint: Path, tmp_path: Path
 ) -> None:

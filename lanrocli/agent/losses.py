@@ -99,6 +99,24 @@ def sac_losses(agent: SACAgent, summaries: torch.Tensor, batch: UpdateTensors, l
 Losses = Callable[["SACAgent", torch.Tensor, UpdateTensors, bool], tuple[torch.Tensor, torch.Tensor]]
 
 
+def compile_problem(device: torch.device) -> str | None:
+    """Why ``SACSettings.compile`` cannot work on ``device`` here, or None. On CPU ``torch.compile`` builds its
+    kernels with a C++ compiler; without one it would fail at a run's first update, after the collection."""
+    if device.type != "cpu":
+        return None
+    from torch._inductor.cpp_builder import get_cpp_compiler
+    from torch._inductor.exc import InvalidCxxCompiler
+
+    try:
+        get_cpp_compiler()
+    except InvalidCxxCompiler as error:
+        return (
+            f"agent.compile: true needs a C++ compiler on CPU, for torch.compile to build its kernels, and none works "
+            f"here ({error}); install one (Debian: apt-get install g++) or set agent.compile: false"
+        )
+    return None
+
+
 def compiled_losses() -> Losses:
     """:func:`sac_losses` compiled for one agent, which must be the only one ever passed to it.
 

@@ -16,7 +16,7 @@ from torch import nn
 from lanrocli.agent.buffer import ReplayBuffer
 from lanrocli.agent.encoder import LanguageEncoder, encode
 from lanrocli.agent.noise import restore_generator
-from lanrocli.agent.losses import UpdateTensors, compiled_losses, sac_losses
+from lanrocli.agent.losses import UpdateTensors, compile_problem, compiled_losses, sac_losses
 from lanrocli.agent.networks import Actor, Critic, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
@@ -97,6 +97,9 @@ class SACAgent:
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(noise_seed)
         self.updates = 0
+        problem = compile_problem(self.device) if s.compile else None
+        if problem is not None:
+            raise ValueError(problem)
         self._losses = compiled_losses() if s.compile else sac_losses
 
     def _learning_rates(self) -> list[float]:

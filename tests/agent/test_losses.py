@@ -44,3 +44,12 @@ def test_compiled_losses_give_the_eager_updates_gradients_for_each_agent_in_one_
             for a, b in zip(got, want):
                 torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-6)
         assert (want_metrics["grounding_loss"] > 0.0) == (settings["architecture"] == "objects")
+
+
+def test_an_agent_that_cannot_compile_its_update_says_so_when_built() -> None:
+    import torch._inductor.config
+
+    with torch._inductor.config.patch({"cpp.cxx": (None, "/nonexistent/g++")}):
+        with pytest.raises(ValueError, match="agent.compile: true needs a C\\+\\+ compiler"):
+            _agent(compile=True)
+    _agent()  # an eager update needs no compiler

@@ -303,18 +303,21 @@ def test_building_and_training_leave_torch_global_generator_alone() -> None:
     assert torch.equal(torch.get_rng_state(), state)
 
 
-@pytest.mark.parametrize("architecture", ["flat", "objects"])
+@pytest.mark.parametrize(
+    ("architecture", "compile"), [("flat", False), ("objects", False), pytest.param("objects", True, marks=pytest.mark.slow)]
+)
 def test_state_survives_weights_only_load_and_resumes_bit_identically(
-    architecture: str, caplog: pytest.LogCaptureFixture
+    architecture: str, compile: bool, caplog: pytest.LogCaptureFixture
 ) -> None:
     rng = np.random.default_rng(0)
-    agent = _agent(critics=2, architecture=architecture)
+    agent = _agent(critics=2, architecture=architecture, compile=compile)
     agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
     for _ in range(3):
         agent.update(_batch(rng))
     with caplog.at_level(logging.WARNING, logger="lanrocli.agent.noise"):
         resumed = SACAgent.from_state_dict(_round_trip(agent.state_dict()))
-    assert not caplog.records, "a state saved on this device type continues its noise stream, silently"
+    noise_records = [record for record in caplog.records if record.name == "lanrocli.agent.noise"]
+    assert not noise_records, "a state saved on this device type continues its noise stream, silently"
     assert resumed.settings == agent.settings and resumed.updates == agent.updates
     obs = {"observation": rng.normal(size=(4, OBS_DIM)).astype(np.float32), "instruction": np.tile(BLUE, (4, 1))}
     for _ in range(3):
