@@ -9,15 +9,24 @@ be compiled whole (``SACSettings.compile``), forward and backward, while the enc
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple, Protocol
 
 import torch
 
-from lanrocli.agent.networks import attention_loss
+from lanrocli.agent.networks import Actor, Critic, attention_loss
+from lanrocli.agent.settings import SACSettings
 from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 
-if TYPE_CHECKING:
-    from lanrocli.agent.sac import SACAgent
+
+class Learner(Protocol):
+    """What the losses read of an agent (:class:`~lanrocli.agent.sac.SACAgent`)."""
+
+    settings: SACSettings
+    actor: Actor
+    critic: Critic
+    target_critic: Critic
+    log_alpha: torch.Tensor
+    target_entropy: float
 
 
 class UpdateTensors(NamedTuple):
@@ -40,7 +49,7 @@ class UpdateTensors(NamedTuple):
     next_noise: torch.Tensor
 
 
-def sac_losses(agent: SACAgent, summaries: torch.Tensor, batch: UpdateTensors, labelled: bool) -> tuple[torch.Tensor, torch.Tensor]:
+def sac_losses(agent: Learner, summaries: torch.Tensor, batch: UpdateTensors, labelled: bool) -> tuple[torch.Tensor, torch.Tensor]:
     """The sum of the critic's, the actor's, the temperature's and the grounding loss, and the update's
     metrics in :data:`~lanrocli.agent.settings.UPDATE_METRICS`' order.
 
@@ -96,7 +105,7 @@ def sac_losses(agent: SACAgent, summaries: torch.Tensor, batch: UpdateTensors, l
     return total, torch.stack([metric.detach() for metric in metrics])
 
 
-Losses = Callable[["SACAgent", torch.Tensor, UpdateTensors, bool], tuple[torch.Tensor, torch.Tensor]]
+Losses = Callable[[Learner, torch.Tensor, UpdateTensors, bool], tuple[torch.Tensor, torch.Tensor]]
 
 
 def compile_problem(device: torch.device) -> str | None:
@@ -122,7 +131,7 @@ def compiled_losses() -> Losses:
 
     Its entries are kept apart from any other agent's (``isolate_recompiles``), and they skip the guards on
     the networks' modules: an agent's modules never change after it is built (its parameters change in place),
-    and checking them took a few per cent of every update. Shapes are fixed (``dynamic=False``): an agent's
+    and checking all their attributes on every call is a cost the update would pay for nothing. Shapes are fixed (``dynamic=False``): an agent's
     batches all have the same size; a changed setting (a stage's gamma) or a batch without labels compiles
     another entry.
     """

@@ -313,7 +313,11 @@ class Critic(nn.Module):
         h = torch.baddbmm(observed, action.expand(self.n_critics, -1, -1), weights(self._first_layer())[0][:, -self.action_dim :])
         if len(self.body) > 0:  # the first layer was the body's; the rest of the body and the output follow
             for layer in [*self.body[1:], self.q]:
-                h = torch.baddbmm(weights(layer)[1], h, weights(layer)[0]) if isinstance(layer, EnsembleLinear) else layer(h)
+                if isinstance(layer, EnsembleLinear):
+                    weight, bias = weights(layer)
+                    h = torch.baddbmm(bias, h, weight)
+                else:
+                    h = layer(h)
         return h.squeeze(2)
 
     def _first_layer(self) -> EnsembleLinear:

@@ -87,9 +87,9 @@ class SACSettings:
     """Added to the observation variance: a feature that barely varies is scaled by at most 100."""
     compile: bool = False
     """Compile the update's losses with ``torch.compile`` (:mod:`lanrocli.agent.losses`): the same arithmetic
-    in fewer, fused operations, so a few seconds of compiling at a run's start buy faster updates
-    (docs/performance.md). Fused sums round differently in the last bits, so a run is reproducible with the
-    setting it ran with."""
+    in fewer, fused operations; compiling when an agent first updates buys faster updates after
+    (docs/performance.md). On CPU it needs a C++ compiler. Fused sums round differently in the last bits, so
+    a run is reproducible with the setting it ran with."""
 
     ARCHITECTURE: ClassVar[tuple[str, ...]] = (
         "critics", "embedding_size", "language_size", "obs_size", "hidden_size", "hidden_layers", "architecture",
