@@ -124,5 +124,6 @@ def main() -> None:
         print(f"round {round_}: ms per update " + ", ".join(f"{name} {ms:.2f}" for name, ms in times.items())
               + "; " + ", ".join(f"eager / {name} {times['eager'] / ms:.2f}" for name, ms in times.items() if name != "eager"))
 
+
 if __name__ == "__main__":
     main()
