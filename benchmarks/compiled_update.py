@@ -30,6 +30,7 @@ from pathlib import Path
 import torch
 from recorded_batches import batch_arguments, compiled_twin, record_batches
 
+from lanrocli.agent.encoder import stacked_gates
 from lanrocli.agent.losses import UpdateTensors, sac_losses
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import UPDATE_METRICS
@@ -59,11 +60,7 @@ def whole_losses(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """``SACAgent.update``'s summed loss and its metrics, the sentences read in fixed shapes: every sentence
     over the vocabulary's full length (for an agent with its own actor encoder, as the shipped curricula's)."""
-    encoders = agent._update_encoders()
-    tables = torch.stack([torch.addmm(e.gru.bias_ih_l0, e.embedding.weight, e.gru.weight_ih_l0.t()) for e in encoders])
-    weight_hh = torch.stack([e.gru.weight_hh_l0 for e in encoders])
-    bias_hh = torch.stack([e.gru.bias_hh_l0 for e in encoders])
-    return sac_losses(agent, read_all(tables, weight_hh, bias_hh, tokens), tensors, labelled)
+    return sac_losses(agent, read_all(*stacked_gates(agent._update_encoders()), tokens), tensors, labelled)
 
 
 def whole_update(agent: SACAgent, compiled: Callable[..., tuple[torch.Tensor, torch.Tensor]], batch: Batch) -> dict[str, float]:

@@ -78,13 +78,18 @@ def _distinct_rows(tokens: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return tokens[torch.as_tensor(first, device=tokens.device)], torch.as_tensor(inverse.ravel(), device=tokens.device)
 
 
-def _summarise(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> torch.Tensor:
-    """Every row of ``tokens`` read by every encoder, [encoders, B, hidden]; an empty row reads as zeros."""
+def stacked_gates(encoders: Sequence[LanguageEncoder]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The encoders' GRUs as :func:`~lanrocli.agent.gru.read_sentences` steps them together: each word's input
+    gates [encoders, vocab, 3 * size], and the recurrent weights [encoders, 3 * size, size] and biases."""
     grus = [encoder.gru for encoder in encoders]
     words = [encoder.embedding.weight for encoder in encoders]
     tables = torch.stack([torch.addmm(gru.bias_ih_l0, word, gru.weight_ih_l0.t()) for word, gru in zip(words, grus)])
-    weight_hh = torch.stack([gru.weight_hh_l0 for gru in grus])
-    bias_hh = torch.stack([gru.bias_hh_l0 for gru in grus])
+    return tables, torch.stack([gru.weight_hh_l0 for gru in grus]), torch.stack([gru.bias_hh_l0 for gru in grus])
+
+
+def _summarise(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> torch.Tensor:
+    """Every row of ``tokens`` read by every encoder, [encoders, B, hidden]; an empty row reads as zeros."""
+    tables, weight_hh, bias_hh = stacked_gates(encoders)
     learning = [any(p.requires_grad for p in encoder.parameters()) for encoder in encoders]
     trained = sum(learning) if learning == sorted(learning, reverse=True) else None  # learning ones first
     return read_sentences(tables, weight_hh, bias_hh, tokens, PAD_ID, trained)
