@@ -70,7 +70,7 @@ def whole_update(agent: SACAgent, compiled: Callable[..., tuple[torch.Tensor, to
     """One update of ``agent`` with the losses compiled whole: as ``SACAgent.update``, but for the sentences'
     reading."""
     tensors, tokens = agent._update_inputs(batch)
-    loss, metrics = compiled(agent, tensors, tokens, bool((batch.label >= 0).any()))
+    loss, metrics = compiled(agent, tensors, tokens, batch.labelled)
     agent._step(loss)
     return dict(zip(UPDATE_METRICS, metrics.tolist()))
 
@@ -87,7 +87,7 @@ def read_in_advance(agent: SACAgent, batches: list[Batch]) -> Callable[[Batch], 
     def update(batch: Batch) -> None:
         tensors, _ = agent._update_inputs(batch)
         read = by_batch[id(batch)].clone().requires_grad_()
-        loss, _ = agent._losses(agent, read, tensors, bool((batch.label >= 0).any()))
+        loss, _ = agent._losses(agent, read, tensors, batch.labelled)
         agent._step(loss)
 
     return update

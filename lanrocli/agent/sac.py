@@ -171,7 +171,7 @@ class SACAgent:
         # The critic's, the actor's and the target critic's encoders read this and the next sentences (they
         # nearly always coincide) in one pass.
         summaries = encode(self._update_encoders(), tokens)
-        loss, metrics = self._losses(self, summaries, tensors, bool((batch.label >= 0).any()))
+        loss, metrics = self._losses(self, summaries, tensors, batch.labelled)
         self._step(loss)
         return dict(zip(UPDATE_METRICS, metrics.tolist()))
 

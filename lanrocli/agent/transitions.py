@@ -79,6 +79,12 @@ class Batch:
     steps: np.ndarray  # int64 [B], 1 for one-step transitions
 
     @property
+    def labelled(self) -> bool:
+        """Whether any row carries a ``label``: a batch without one has no grounding loss to compute, and a
+        compiled update holds a graph for each case."""
+        return bool((self.label >= 0).any())
+
+    @property
     def relabelled(self) -> np.ndarray:
         """bool [B]: which transitions got a hindsight sentence."""
         return self.named >= 0
