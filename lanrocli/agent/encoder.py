@@ -10,6 +10,7 @@ import torch
 from torch import nn
 
 from lanrocli.agent.gru import read_sentences
+from lanrocli.agent.native import native_reader
 from lanrocli.language import PAD_ID
 
 
@@ -49,8 +50,14 @@ def encode(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> torch.T
     transition's sentence and its next one, nearly always the same. Encoders whose parameters need no
     gradient (a target network's) should come last: the backward pass then leaves them out.
     """
+    tables, weight_hh, bias_hh = stacked_gates(encoders)
+    learning = [any(p.requires_grad for p in encoder.parameters()) for encoder in encoders]
+    trained = sum(learning) if learning == sorted(learning, reverse=True) else len(encoders)  # learning ones first
+    reader = native_reader() if tokens.device.type == "cpu" else None
+    if reader is not None:  # the same numbers, one C++ call each way
+        return reader(tables, weight_hh, bias_hh, tokens, PAD_ID, trained)
     sentences, inverse = _distinct(tokens, encoders[0].vocab_size)
-    return _summarise(encoders, sentences).index_select(1, inverse)
+    return read_sentences(tables, weight_hh, bias_hh, sentences, PAD_ID, trained).index_select(1, inverse)
 
 
 def _distinct(tokens: torch.Tensor, vocab_size: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -85,11 +92,3 @@ def stacked_gates(encoders: Sequence[LanguageEncoder]) -> tuple[torch.Tensor, to
     words = [encoder.embedding.weight for encoder in encoders]
     tables = torch.stack([torch.addmm(gru.bias_ih_l0, word, gru.weight_ih_l0.t()) for word, gru in zip(words, grus)])
     return tables, torch.stack([gru.weight_hh_l0 for gru in grus]), torch.stack([gru.bias_hh_l0 for gru in grus])
-
-
-def _summarise(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> torch.Tensor:
-    """Every row of ``tokens`` read by every encoder, [encoders, B, hidden]; an empty row reads as zeros."""
-    tables, weight_hh, bias_hh = stacked_gates(encoders)
-    learning = [any(p.requires_grad for p in encoder.parameters()) for encoder in encoders]
-    trained = sum(learning) if learning == sorted(learning, reverse=True) else None  # learning ones first
-    return read_sentences(tables, weight_hh, bias_hh, tokens, PAD_ID, trained)

@@ -12,9 +12,8 @@ on CPU. Here:
   the padded array on reach's instructions;
 - the backward pass is the chain rule applied by hand: what does not depend on the incoming gradient is
   computed for all steps at once, leaving three operations per step, and the weight gradient is one product;
-- on CPU the loops over words run in C++ (``gru_steps.cpp``, :mod:`lanrocli.agent.native`) where the machine
-  can build it, with the same numbers bit for bit: :func:`forward_steps` and :func:`backward_steps` are
-  their reference.
+- on CPU, where the machine can build it, all of this runs in C++ (``gru_steps.cpp``,
+  :mod:`lanrocli.agent.native`) with the same numbers bit for bit: this module is its reference.
 
 What that gains over ``nn.GRU`` is measured in docs/performance.md.
 
@@ -32,8 +31,6 @@ import itertools
 from typing import Any
 
 import torch
-
-from lanrocli.agent.native import Steps, native_steps
 
 
 def _tanh(x: torch.Tensor) -> torch.Tensor:
@@ -120,19 +117,8 @@ def backward_steps(
     return [grad_inputs, torch.bmm(hidden_all.transpose(1, 2), before), hidden_all.sum(dim=1)]
 
 
-PYTHON_STEPS = Steps(forward_steps, backward_steps)
-
-
-def steps(device: torch.device) -> Steps:
-    """The C++ loops for CPU tensors where this machine can build them, else the Python ones: the same
-    numbers either way. On a GPU every operation is a kernel launch whichever language makes it."""
-    native = native_steps() if device.type == "cpu" else None
-    return native or PYTHON_STEPS
-
-
 class _LastState(torch.autograd.Function):
-    """:func:`forward_steps` and :func:`backward_steps` (or the same loops in C++, :mod:`.native`) as one
-    differentiable function. Only the first ``trained`` members get gradients; the others (a target network)
+    """:func:`forward_steps` and :func:`backward_steps` as one differentiable function. Only the first ``trained`` members get gradients; the others (a target network)
     step along in the forward pass alone."""
 
     @staticmethod
@@ -145,7 +131,7 @@ class _LastState(torch.autograd.Function):
         trained: int,
     ) -> torch.Tensor:
         keep = trained > 0 and any(ctx.needs_input_grad)
-        last, *saved = steps(inputs.device).forward(inputs, weight_hh, bias_hh, active, trained, keep)
+        last, *saved = forward_steps(inputs, weight_hh, bias_hh, active, trained, keep)
         if keep:
             ctx.save_for_backward(weight_hh[:trained], *saved)
             ctx.active, ctx.frozen = active, inputs.shape[0] - trained
@@ -153,7 +139,7 @@ class _LastState(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx: Any, grad: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, None, None]:
-        grads = steps(grad.device).backward(grad, *ctx.saved_tensors, ctx.active)
+        grads = backward_steps(grad, *ctx.saved_tensors, ctx.active)
         if ctx.frozen:
             grads = [torch.cat([part, part.new_zeros(ctx.frozen, *part.shape[1:])]) for part in grads]
         return *grads, None, None

@@ -1,16 +1,18 @@
-"""The GRU's word-by-word loops in C++ (``gru_steps.cpp``), built the first time a process needs them.
+"""An update's reading of its sentences in C++ (``gru_steps.cpp``), built the first time a process needs it.
 
-An update reads its batch's sentences one word at a time, a few hundred small tensor operations whose cost
-on CPU is mostly the Python interpreter's, not the arithmetic. The C++ loops make the same ATen calls as
-:func:`lanrocli.agent.gru.forward_steps` and :func:`~lanrocli.agent.gru.backward_steps`, in the same order,
-so they give the same numbers bit for bit (a test holds them to it): choosing between the two changes how
-fast an update runs, never what it computes. That is why a machine that cannot build them (no C++
-compiler) trains on with the Python loops after one warning instead of stopping.
+An update reads its batch's sentences one word at a time: a few hundred small tensor operations whose cost
+on CPU is mostly dispatch, allocation and the Python interpreter, not arithmetic. :func:`native_reader`
+gives the whole of :func:`lanrocli.agent.encoder.encode` (finding the distinct sentences, the GRUs' steps,
+their backward pass) as one C++ call each way. It makes the same ATen calls where rounding is not plain
+IEEE arithmetic and the same roundings where it is, so it gives the Python's numbers bit for bit (a test
+holds it to that): whether a machine can build it changes how fast an update runs, never what it computes.
+That is why a machine that cannot build it (no C++ compiler, no ninja) trains on in Python after one
+warning instead of stopping.
 
 ``torch.utils.cpp_extension`` builds the library with the machine's C++ compiler and ninja into torch's
 extension folder (``~/.cache/torch_extensions`` unless ``TORCH_EXTENSIONS_DIR`` says otherwise), once per
-machine, torch version and copy of the source; later processes load it in well under a second, and processes that start at once
-(a sweep's trials) wait for one build under torch's file lock.
+machine, torch version and copy of the source; later processes load it in a fraction of a second, and
+processes that start at once (a sweep's trials) wait for one build under torch's file lock.
 """
 
 from __future__ import annotations
@@ -19,28 +21,60 @@ import functools
 import hashlib
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import torch
 
 SOURCE = Path(__file__).with_name("gru_steps.cpp")
 LIBRARY = "lanro_gru"  # the operator namespace gru_steps.cpp registers: torch.ops.lanro_gru
 
+Reader = Callable[[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, int, int], torch.Tensor]
 
-@dataclass(frozen=True)
-class Steps:
-    """A GRU's forward and backward loops, with :func:`lanrocli.agent.gru.forward_steps`' and
-    :func:`~lanrocli.agent.gru.backward_steps`' signatures."""
 
-    forward: Callable[..., list[torch.Tensor]]
-    backward: Callable[..., list[torch.Tensor]]
+class _Read(torch.autograd.Function):
+    """``torch.ops.lanro_gru.read`` and its backward pass as one differentiable function."""
+
+    @staticmethod
+    def forward(  # type: ignore[override]
+        ctx: Any,
+        tables: torch.Tensor,
+        weight_hh: torch.Tensor,
+        bias_hh: torch.Tensor,
+        tokens: torch.Tensor,
+        pad_id: int,
+        trained: int,
+    ) -> torch.Tensor:
+        operators = getattr(torch.ops, LIBRARY)
+        keep = trained > 0 and any(ctx.needs_input_grad[:3])
+        summaries, *saved = operators.read(tables, weight_hh, bias_hh, tokens, pad_id, trained, keep)
+        if keep and saved:
+            ctx.save_for_backward(weight_hh[:trained], *saved)
+            ctx.members, ctx.vocab_size = tables.shape[0], tables.shape[1]
+        elif keep:  # no sentence had a word: the summaries are zeros that depend on nothing
+            ctx.mark_non_differentiable(summaries)
+        return summaries
+
+    @staticmethod
+    def backward(ctx: Any, grad: torch.Tensor) -> tuple[torch.Tensor | None, ...]:
+        operators = getattr(torch.ops, LIBRARY)
+        grads = operators.read_backward(grad, *ctx.saved_tensors, ctx.members, ctx.vocab_size)
+        return *grads, None, None, None
+
+
+def _read(
+    tables: torch.Tensor, weight_hh: torch.Tensor, bias_hh: torch.Tensor, tokens: torch.Tensor, pad_id: int, trained: int
+) -> torch.Tensor:
+    """:func:`lanrocli.agent.encoder.encode`'s reading of ``tokens`` [B, L] by the GRUs whose input gates,
+    recurrent weights and biases are given, of which the first ``trained`` get gradients (as
+    :func:`lanrocli.agent.gru.read_sentences` takes them): [members, B, size]."""
+    return _Read.apply(tables, weight_hh, bias_hh, tokens, pad_id, trained if torch.is_grad_enabled() else 0)
 
 
 @functools.cache
-def native_steps() -> Steps | None:
-    """The C++ loops, built or loaded once per process; None, after a warning that says why, where they
-    cannot be built."""
+def native_reader() -> Reader | None:
+    """The C++ reading for CPU tensors, built or loaded once per process; None, after a warning that says
+    why, where it cannot be built."""
     from torch.utils import cpp_extension  # imports setuptools: only when needed
 
     # One build per source text and place: two installs (a checkout and a wheel) would otherwise take turns
@@ -48,17 +82,17 @@ def native_steps() -> Steps | None:
     digest = hashlib.sha256(SOURCE.read_bytes() + str(SOURCE).encode()).hexdigest()[:12]
     try:
         cpp_extension.load(
-            name=f"{LIBRARY}_{digest}", sources=[str(SOURCE)], extra_cflags=["-O3", "-ffp-contract=off"], is_python_module=False
+            name=f"{LIBRARY}_{digest}", sources=[str(SOURCE)], extra_cflags=["-O3", "-ffp-contract=off"],
+            is_python_module=False,
         )
     except (OSError, RuntimeError, ImportError) as error:  # no compiler, no ninja, a failed build
-        reason = " ".join(str(error).split())[:300]
+        reason = " ".join(str(error).split())[-300:]  # a failed build's last words are its compiler's
         warnings.warn(
-            f"lanro could not build its C++ GRU steps ({reason}); updates read sentences with the Python "
-            "steps instead, which give the same numbers more slowly. To build them, install a C++ compiler "
-            "and ninja (Debian: apt-get install g++ ninja-build) and start again.",
+            f"lanro could not build its C++ reading of sentences ({reason}); updates read them in Python "
+            "instead, which gives the same numbers more slowly. To build it, install a C++ compiler and ninja "
+            "(Debian: apt-get install g++ ninja-build) and start again.",
             RuntimeWarning,
             stacklevel=2,
         )
         return None
-    operators = getattr(torch.ops, LIBRARY)
-    return Steps(operators.forward, operators.backward)
+    return _read

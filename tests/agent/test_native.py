@@ -1,5 +1,5 @@
-"""The GRU's loops in C++ give the Python loops' numbers bit for bit, and a machine that cannot build them
-trains on with the Python ones."""
+"""The sentences' reading in C++ gives the Python's numbers bit for bit, and a machine that cannot build it
+trains on with the Python."""
 
 from __future__ import annotations
 
@@ -7,51 +7,71 @@ import numpy as np
 import pytest
 import torch
 
-from lanrocli.agent import gru, native
-from lanrocli.agent.gru import PYTHON_STEPS, backward_steps, forward_steps
-
-from lanrocli.language import sample_sentence
+from lanrocli.agent import encoder, native
+from lanrocli.agent.encoder import _distinct
+from lanrocli.agent.gru import read_sentences
+from lanrocli.language import PAD_ID, sample_sentence
 
 from .episodes import OBS_DIM, VOCAB
 from .test_sac import _agent, _grounding_batch
 
 
-def _built() -> native.Steps:
-    steps = native.native_steps()
-    assert steps is not None, "the C++ GRU steps did not build: the tests need a C++ compiler and ninja (see the warning)"
-    return steps
+def _built() -> native.Reader:
+    reader = native.native_reader()
+    assert reader is not None, "the C++ reading did not build: the tests need a C++ compiler and ninja (see the warning)"
+    return reader
+
+
+def _python(tables: torch.Tensor, weight_hh: torch.Tensor, bias_hh: torch.Tensor, tokens: torch.Tensor, trained: int) -> torch.Tensor:
+    """encode's reading where the C++ one cannot be built."""
+    sentences, inverse = _distinct(tokens, tables.shape[1])
+    return read_sentences(tables, weight_hh, bias_hh, sentences, PAD_ID, trained).index_select(1, inverse)
+
+
+def _tokens(rng: np.random.Generator, rows: int, width: int, vocab: int) -> torch.Tensor:
+    """Rows of words then padding, of every length from none to ``width``, many repeated."""
+    tokens = rng.integers(1, vocab, size=(rows, width))
+    tokens[np.arange(width) >= rng.integers(0, width + 1, size=(rows, 1))] = PAD_ID
+    tokens[rng.random(rows) < 0.4] = tokens[0]
+    return torch.as_tensor(tokens)
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_the_cpp_steps_give_the_python_steps_numbers_bit_for_bit(dtype: torch.dtype) -> None:
-    """Random shapes: sizes whose rows do not fill a vector register (where a kernel's scalar tail rounds),
-    sentences ending at every step, members that are not trained, and a forward pass that keeps nothing."""
-    built = _built()
+def test_the_cpp_reading_gives_the_pythons_summaries_and_gradients_bit_for_bit(dtype: torch.dtype) -> None:
+    """Random GRUs and batches: sentences that order as numbers (vocab ** width < 2 ** 63) and as rows of words,
+    sizes whose rows do not fill a vector register (where a kernel's last elements round apart), members
+    that are not trained, empty sentences."""
+    read = _built()
     rng = np.random.default_rng(0)
-    for _ in range(40):
+    for case in range(40):
         members = int(rng.integers(1, 4))
-        trained = int(rng.integers(0, members + 1))
-        size = int(rng.choice([1, 3, 7, 8, 17, 32]))
-        active = sorted(rng.integers(1, 30, size=int(rng.integers(1, 12))).tolist(), reverse=True)
-        generator = torch.Generator().manual_seed(int(rng.integers(1 << 30)))
-        inputs = torch.randn(members, sum(active), 3 * size, dtype=dtype, generator=generator)
-        weight_hh = torch.randn(members, 3 * size, size, dtype=dtype, generator=generator) / size**0.5
-        bias_hh = torch.randn(members, 3 * size, dtype=dtype, generator=generator)
-        keep = trained > 0
-        want = forward_steps(inputs, weight_hh, bias_hh, active, trained, keep)
-        got = built.forward(inputs, weight_hh, bias_hh, active, trained, keep)
-        assert len(got) == len(want)
-        for a, b in zip(got, want):
-            assert a.shape == b.shape and torch.equal(a, b)
-        if keep:
-            grad = torch.randn(members, active[0], size, dtype=dtype, generator=generator)
-            for a, b in zip(built.backward(grad, weight_hh[:trained], *got[1:], active), backward_steps(grad, weight_hh[:trained], *want[1:], active)):
-                assert a.shape == b.shape and torch.equal(a, b)
+        trained = int(rng.integers(1, members + 1))
+        size, vocab = int(rng.choice([1, 3, 7, 8, 17, 32])), int(rng.choice([5, 61]))
+        tokens = _tokens(rng, int(rng.integers(1, 80)), int(rng.choice([3, 10, 16])), vocab)
+        generator = torch.Generator().manual_seed(case)
+        leaves = [
+            torch.randn(shape, dtype=dtype, generator=generator).requires_grad_()
+            for shape in ((members, vocab, 3 * size), (members, 3 * size, size), (members, 3 * size))
+        ]
+        weights = torch.randn(members, tokens.shape[0], size, dtype=dtype, generator=generator)
+        results = []
+        for reading in (read, lambda *args: _python(*args[:4], args[5])):
+            summaries = reading(*leaves, tokens, PAD_ID, trained)
+            results.append([summaries.detach(), *torch.autograd.grad((summaries * weights).sum(), leaves)])
+        for got, want in zip(*results):
+            assert got.shape == want.shape and torch.equal(got, want), case
 
 
-def test_updates_with_the_cpp_steps_leave_every_weight_as_the_python_steps_do(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_batch_without_words_reads_as_zeros_that_nothing_learns_from() -> None:
+    tables, weight_hh, bias_hh = (torch.randn(shape, requires_grad=True) for shape in ((2, 9, 12), (2, 12, 4), (2, 12)))
+    tokens = torch.zeros(5, 6, dtype=torch.int64)
+    for summaries in (_built()(tables, weight_hh, bias_hh, tokens, PAD_ID, 2), _python(tables, weight_hh, bias_hh, tokens, 2)):
+        assert torch.equal(summaries, torch.zeros(2, 5, 4)) and not summaries.requires_grad
+
+
+def test_updates_with_the_cpp_reading_leave_every_weight_as_the_python_does(monkeypatch: pytest.MonkeyPatch) -> None:
     """The shipped agent's shape (its own actor encoder, a target critic stepping along without gradients)
-    through twenty updates: bit for bit, so a run's numbers do not depend on whether the machine built them."""
+    through twenty updates: bit for bit, so a run's numbers do not depend on whether the machine built it."""
     _built()
     rng = np.random.default_rng(0)
     batches = [_grounding_batch(rng) for _ in range(20)]
@@ -60,9 +80,9 @@ def test_updates_with_the_cpp_steps_leave_every_weight_as_the_python_steps_do(mo
         batch.instruction, batch.next_instruction = np.split(VOCAB.encode_many(texts), 2)
     observations = rng.normal(size=(50, OBS_DIM))
     states = []
-    for chosen in (None, PYTHON_STEPS):
-        if chosen is not None:
-            monkeypatch.setattr(gru, "steps", lambda device: chosen)
+    for built in (True, False):
+        if not built:
+            monkeypatch.setattr(encoder, "native_reader", lambda: None)
         agent = _agent(seed=3, architecture="objects")
         agent.update_normalizer(observations)
         for batch in batches:
@@ -73,20 +93,12 @@ def test_updates_with_the_cpp_steps_leave_every_weight_as_the_python_steps_do(mo
             assert torch.equal(a, b), f"{network}.{name}"
 
 
-def test_a_machine_that_cannot_build_them_is_warned_once_and_reads_with_the_python_steps(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_machine_that_cannot_build_it_is_warned_and_reads_in_python(monkeypatch: pytest.MonkeyPatch) -> None:
     from torch.utils import cpp_extension
 
     def no_ninja(*args: object, **kwargs: object) -> None:
         raise RuntimeError("Ninja is required to load C++ extensions")
 
     monkeypatch.setattr(cpp_extension, "load", no_ninja)
-    with pytest.warns(RuntimeWarning, match="could not build its C\\+\\+ GRU steps \\(Ninja is required.*apt-get install g\\+\\+ ninja-build"):
-        assert native.native_steps.__wrapped__() is None
-    monkeypatch.setattr(gru, "native_steps", lambda: None)
-    assert gru.steps(torch.device("cpu")) is PYTHON_STEPS
-
-
-def test_tensors_off_the_cpu_read_with_the_python_steps() -> None:
-    """The C++ loops index CPU memory; a GPU's tensors keep the Python loops, whose operations run there."""
-    assert gru.steps(torch.device("cuda")) is PYTHON_STEPS
-    assert gru.steps(torch.device("meta")) is PYTHON_STEPS
+    with pytest.warns(RuntimeWarning, match="could not build its C\\+\\+ reading of sentences \\(Ninja is required.*apt-get install g\\+\\+ ninja-build"):
+        assert native.native_reader.__wrapped__() is None

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from lanrocli.agent.encoder import LanguageEncoder, _distinct_rows, _summarise, encode
+from lanrocli.agent.encoder import LanguageEncoder, _distinct_rows, encode, stacked_gates
+from lanrocli.agent.gru import read_sentences
 from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, ObjectLayout, SceneReader
-from lanrocli.language import grammar_vocabulary, sample_sentence
+from lanrocli.language import PAD_ID, grammar_vocabulary, sample_sentence
 
 VOCAB = grammar_vocabulary()
 
@@ -50,7 +51,7 @@ def test_repeated_sentences_give_the_gradients_of_encoding_every_row() -> None:
     weights = torch.randn(tokens.shape[0], 32)
     shared, reference = _encoder(), _encoder()
     (shared(tokens) * weights).sum().backward()
-    (_summarise([reference], tokens)[0] * weights).sum().backward()
+    (read_sentences(*stacked_gates([reference]), tokens, PAD_ID)[0] * weights).sum().backward()  # every row read
     for a, b in zip(shared.parameters(), reference.parameters()):
         torch.testing.assert_close(a.grad, b.grad)
 

@@ -1,11 +1,11 @@
-"""What the GRU's loops in C++ (``lanrocli/agent/gru_steps.cpp``) save against the same loops in Python
-(``lanrocli/agent/gru.py``), on the shipped curricula's agent and batches recorded in one of reach.yaml's
-stages, alternating rounds: the sentences' reading alone (forward and backward, as an update reads them), and
-whole eager updates. The two give the same numbers bit for bit, which the run checks on the weights the
-updates leave.
+"""What an update's reading of its sentences in C++ (``lanrocli/agent/native.py``, ``gru_steps.cpp``) saves
+against the same reading in Python (``encoder.py``, ``gru.py``), on the shipped curricula's agent and batches
+recorded in one of reach.yaml's stages, alternating rounds: the reading alone (forward and backward, as an
+update reads), and whole eager updates. The two give the same numbers bit for bit, which the run checks on
+the weights the updates leave.
 
-    python benchmarks/gru_steps.py --stage 3 --updates 100 --rounds 3
-    python benchmarks/gru_steps.py --load recorded.pt   # batches saved by compiled_update.py --save
+    python benchmarks/native_reading.py --stage 3 --updates 100 --rounds 3
+    python benchmarks/native_reading.py --load recorded.pt   # batches saved by compiled_update.py --save
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from unittest import mock
 import torch
 from recorded_batches import batch_arguments, record_batches
 
-from lanrocli.agent import gru
+from lanrocli.agent import encoder
 from lanrocli.agent.encoder import encode
-from lanrocli.agent.native import Steps, native_steps
+from lanrocli.agent.native import Reader, native_reader
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.transitions import Batch
 
@@ -62,10 +62,10 @@ def main() -> None:
     else:
         agent, batches = record_batches(args, parser)
         state = agent.state_dict()
-    built = native_steps()
+    built = native_reader()
     if built is None:
-        parser.error("the C++ steps did not build on this machine (see the warning)")
-    ways: dict[str, Steps] = {"python": gru.PYTHON_STEPS, "c++": built}
+        parser.error("the C++ reading did not build on this machine (see the warning)")
+    ways: dict[str, Reader | None] = {"python": None, "c++": built}
     agents = {name: SACAgent.from_state_dict(state) for name in ways}
     jobs = {
         (name, job): work
@@ -75,8 +75,8 @@ def main() -> None:
     times: dict[tuple[str, str], list[float]] = {key: [] for key in jobs}
     for _ in range(args.rounds):
         for job in ("reading", "update"):
-            for name, steps in ways.items():
-                with mock.patch.object(gru, "steps", lambda device, steps=steps: steps):
+            for name, reader in ways.items():
+                with mock.patch.object(encoder, "native_reader", lambda reader=reader: reader):
                     start = time.perf_counter()
                     jobs[name, job]()
                     times[name, job].append((time.perf_counter() - start) / len(batches) * 1000)
