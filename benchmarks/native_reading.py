@@ -5,7 +5,6 @@ update reads), and whole eager updates. The two give the same numbers bit for bi
 the weights the updates leave.
 
     python benchmarks/native_reading.py --stage 3 --updates 100 --rounds 3
-    python benchmarks/native_reading.py --load recorded.pt   # batches saved by compiled_update.py --save
 """
 
 from __future__ import annotations
@@ -13,7 +12,6 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Callable
-from pathlib import Path
 from unittest import mock
 
 import torch
@@ -51,17 +49,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     batch_arguments(parser, stage=3, updates=100)
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--load", type=Path, help="time on the agent and batches recorded in this file")
     args = parser.parse_args()
     torch.set_num_threads(1)
 
-    if args.load is not None:
-        recorded = torch.load(args.load, weights_only=True)
-        state = recorded["agent"]
-        batches = [Batch(**{name: value.numpy() for name, value in batch.items()}) for batch in recorded["batches"]]
-    else:
-        agent, batches = record_batches(args, parser)
-        state = agent.state_dict()
+    agent, batches = record_batches(args, parser)
+    state = agent.state_dict()
     built = native_reader()
     if built is None:
         parser.error("the C++ reading did not build on this machine (see the warning)")
