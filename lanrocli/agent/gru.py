@@ -118,8 +118,8 @@ def backward_steps(
 
 
 class _LastState(torch.autograd.Function):
-    """:func:`forward_steps` and :func:`backward_steps` as one differentiable function. Only the first ``trained`` members get gradients; the others (a target network)
-    step along in the forward pass alone."""
+    """:func:`forward_steps` and :func:`backward_steps` as one differentiable function. Only the first
+    ``trained`` members get gradients; the others (a target network) step along in the forward pass alone."""
 
     @staticmethod
     def forward(  # type: ignore[override]

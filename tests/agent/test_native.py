@@ -18,11 +18,13 @@ from .test_sac import _agent, _grounding_batch
 
 def _built() -> native.Reader:
     reader = native.native_reader()
-    assert reader is not None, "the C++ reading did not build: the tests need a C++ compiler and ninja (see the warning)"
+    assert reader is not None, "the C++ reading did not build: the tests need a C++ compiler and ninja (see its warning)"
     return reader
 
 
-def _python(tables: torch.Tensor, weight_hh: torch.Tensor, bias_hh: torch.Tensor, tokens: torch.Tensor, trained: int) -> torch.Tensor:
+def _python(
+    tables: torch.Tensor, weight_hh: torch.Tensor, bias_hh: torch.Tensor, tokens: torch.Tensor, trained: int
+) -> torch.Tensor:
     """encode's reading where the C++ one cannot be built."""
     sentences, inverse = _distinct(tokens, tables.shape[1])
     return read_sentences(tables, weight_hh, bias_hh, sentences, PAD_ID, trained).index_select(1, inverse)
@@ -100,5 +102,6 @@ def test_a_machine_that_cannot_build_it_is_warned_and_reads_in_python(monkeypatc
         raise RuntimeError("Ninja is required to load C++ extensions")
 
     monkeypatch.setattr(cpp_extension, "load", no_ninja)
-    with pytest.warns(RuntimeWarning, match="could not build its C\\+\\+ reading of sentences \\(Ninja is required.*apt-get install g\\+\\+ ninja-build"):
+    expected = "could not build its C\\+\\+ reading of sentences \\(Ninja is required.*apt-get install g\\+\\+ ninja-build"
+    with pytest.warns(RuntimeWarning, match=expected):
         assert native.native_reader.__wrapped__() is None
