@@ -1,14 +1,14 @@
-// The word-by-word loops of lanrocli/agent/gru.py (forward_steps, backward_steps) in C++, for CPU tensors.
+// An update's reading of its sentences (lanrocli/agent/encoder.py's encode, gru.py's read_sentences,
+// forward_steps and backward_steps) in C++, for CPU tensors: one call forward, one backward.
 //
-// The Python loops make about fifteen small tensor operations a word forward and eight backward, and on a
-// batch of a few dozen short sentences each costs more in dispatch and allocation than in arithmetic. Here
-// a step's element-wise work is plain loops into buffers allocated once a call, and ATen is called only for
-// what is not plain IEEE arithmetic:
-// the matrix products and the sigmoids, on tensors of the shapes and layouts the Python gives them. The
-// loops apply each addition, subtraction and multiplication in the Python's order, with its roundings:
-// compiled with -ffp-contract=off so that none is fused, but for the two that ATen's addcmul fuses on CPU
-// (std::fma here). So the results are the Python loops' bit for bit; tests/agent/test_native.py holds them
-// to it, on the machine that runs the tests.
+// The Python makes about fifteen small tensor operations a word forward and eight backward, and on a batch
+// of a few dozen short sentences each costs more in dispatch and allocation than in arithmetic. Here a
+// step's element-wise work is plain loops into buffers allocated once a call, and ATen is called only for
+// what is not plain IEEE arithmetic (the matrix products, the sigmoids, index_add_), on tensors of the shapes
+// and layouts the Python gives them. The loops apply each addition, subtraction and multiplication in the
+// Python's order, with its roundings: compiled with -ffp-contract=off so that none is fused, but for the two
+// that ATen's addcmul fuses on CPU (std::fma here). So the results are the Python's bit for bit;
+// tests/agent/test_native.py holds them to it, on the machine that runs the tests.
 
 #include <ATen/ATen.h>
 #include <torch/library.h>
@@ -55,6 +55,7 @@ std::vector<at::Tensor> forward_typed(const at::Tensor& inputs_any, const at::Te
   T *before_p = before.data_ptr<T>(), *rz_kept_p = rz_kept.data_ptr<T>(), *n_kept_p = n_kept.data_ptr<T>();
   T* hidden_n_kept_p = hidden_n_kept.data_ptr<T>();
   T* last_p = last.data_ptr<T>();
+  std::vector<T> n_spare(size);  // a row's n where it is not kept
   int64_t start = 0, width = rows;  // width: the rows of h, those that read a word at the step before
   for (size_t t = 0; t < active.size(); ++t) {
     const int64_t k = active[t];
@@ -102,13 +103,10 @@ std::vector<at::Tensor> forward_typed(const at::Tensor& inputs_any, const at::Te
         const int64_t row = m * k + i;
         const T* h_row = h_p + (m * width + i) * size;
         const T* z = rz_p + row * 2 * size + size;
-        T* n_out = m < kept ? n_kept_p + (m * packed + start + i) * size : nullptr;
+        T* __restrict__ n = m < kept ? n_kept_p + (m * packed + start + i) * size : n_spare.data();
         for (int64_t j = 0; j < size; ++j) {
-          const T n = sig_p[row * size + j] * T(2) - T(1);
-          next_p[row * size + j] = std::fma(z[j], h_row[j] - n, n);
-        }
-        if (n_out) {
-          for (int64_t j = 0; j < size; ++j) n_out[j] = sig_p[row * size + j] * T(2) - T(1);
+          n[j] = sig_p[row * size + j] * T(2) - T(1);
+          next_p[row * size + j] = std::fma(z[j], h_row[j] - n[j], n[j]);
         }
       }
     }
@@ -274,12 +272,13 @@ std::vector<at::Tensor> read_batch(const at::Tensor& tables, const at::Tensor& w
   const Sentences found = find_sentences(tokens, pad_id, tables.size(1));
   const int64_t members = tables.size(0), size = weight_hh.size(2), rows = tokens.size(0), length = tokens.size(1);
   const int64_t distinct = static_cast<int64_t>(found.first.size());
+  const int64_t* words = tokens.data_ptr<int64_t>();
   std::vector<int64_t> active, packed_ids;  // who reads a word at each step; the words, step after step
   for (int64_t t = 0; t < length; ++t) {
     int64_t k = 0;
     for (const int64_t d : found.order) {
       if (found.lengths[d] <= t) break;
-      packed_ids.push_back(tokens.data_ptr<int64_t>()[found.first[d] * length + t]);
+      packed_ids.push_back(words[found.first[d] * length + t]);
       ++k;
     }
     if (k == 0) break;
