@@ -26,7 +26,7 @@ class Scratch {
  public:
   Scratch(int64_t members, int64_t rows, int64_t width, const at::TensorOptions& options)
       : members_(members), width_(width), buffer_(at::empty({members * rows * width}, options)) {}
-  at::Tensor rows(int64_t k) const { return buffer_.narrow(0, 0, members_ * k * width_).view({members_, k, width_}); }
+  at::Tensor rows(int64_t k) const { return buffer_.as_strided({members_, k, width_}, {k * width_, width_, 1}); }
 
  private:
   int64_t members_, width_;
@@ -119,11 +119,12 @@ std::vector<at::Tensor> forward_typed(const at::Tensor& inputs_any, const at::Te
   return {last, before, rz_kept, n_kept, hidden_n_kept};
 }
 
+// Returns the gradients of the members' inputs; writes those of their recurrent weights and biases into
+// grad_weight and grad_bias.
 template <typename T>
-std::vector<at::Tensor> backward_typed(const at::Tensor& grad_any, const at::Tensor& weight_hh,
-                                       const at::Tensor& before_any, const at::Tensor& rz_any,
-                                       const at::Tensor& n_any, const at::Tensor& hidden_n_any,
-                                       at::IntArrayRef active) {
+at::Tensor backward_typed(const at::Tensor& grad_any, const at::Tensor& weight_hh, const at::Tensor& before_any,
+                          const at::Tensor& rz_any, const at::Tensor& n_any, const at::Tensor& hidden_n_any,
+                          at::IntArrayRef active, at::Tensor grad_weight, at::Tensor grad_bias) {
   const int64_t members = weight_hh.size(0);
   const at::Tensor grad = grad_any.slice(0, 0, members).contiguous();
   const at::Tensor before = before_any.contiguous(), rz = rz_any.contiguous(), n_all = n_any.contiguous();
@@ -210,7 +211,9 @@ std::vector<at::Tensor> backward_typed(const at::Tensor& grad_any, const at::Ten
       g_stride = wide * size;
     }
   }
-  return {grad_inputs, at::bmm(hidden_all.transpose(1, 2), before), hidden_all.sum(1)};
+  at::bmm_out(grad_weight, hidden_all.transpose(1, 2), before);
+  at::sum_out(grad_bias, hidden_all, 1);
+  return grad_inputs;
 }
 
 // A batch's sentences as the Python's encode orders them: its distinct rows, each row's distinct row
@@ -321,22 +324,21 @@ std::vector<at::Tensor> read_batch_backward(const at::Tensor& grad, const at::Te
                                             int64_t vocab_size) {
   const int64_t size = grad.size(2), distinct = sorted_at.size(0), trained = weight_hh.size(0);
   const std::vector<int64_t> active(active_t.data_ptr<int64_t>(), active_t.data_ptr<int64_t>() + active_t.numel());
-  const at::Tensor by_sentence = at::zeros({members, distinct, size}, grad.options()).index_add_(1, inverse, grad);
-  const at::Tensor by_reading = at::zeros({members, distinct, size}, grad.options()).index_add_(1, sorted_at, by_sentence);
-  std::vector<at::Tensor> grads;
+  // The members past `trained` learn nothing: their gradients stay zero, and nothing is computed for them.
+  const auto options = grad.options();
+  const at::Tensor learning = grad.slice(0, 0, trained);
+  const at::Tensor by_sentence = at::zeros({trained, distinct, size}, options).index_add_(1, inverse, learning);
+  const at::Tensor by_reading = at::zeros({trained, distinct, size}, options).index_add_(1, sorted_at, by_sentence);
+  at::Tensor grad_tables = at::zeros({members, vocab_size, 3 * size}, options);
+  at::Tensor grad_weight = at::zeros({members, 3 * size, size}, options);
+  at::Tensor grad_bias = at::zeros({members, 3 * size}, options);
   AT_DISPATCH_FLOATING_TYPES(grad.scalar_type(), "lanro_gru.read_backward", [&] {
-    grads = backward_typed<scalar_t>(by_reading.slice(1, 0, active[0]), weight_hh, before, rz, n, hidden_n, active);
+    const at::Tensor grad_inputs = backward_typed<scalar_t>(by_reading.slice(1, 0, active[0]), weight_hh, before, rz, n,
+                                                            hidden_n, active, grad_weight.narrow(0, 0, trained),
+                                                            grad_bias.narrow(0, 0, trained));
+    grad_tables.narrow(0, 0, trained).index_add_(1, ids, grad_inputs);
   });
-  for (auto& part : grads) {
-    if (members > trained) {
-      std::vector<int64_t> shape = part.sizes().vec();
-      shape[0] = members - trained;
-      part = at::cat({part, at::zeros(shape, part.options())});
-    }
-  }
-  const at::Tensor grad_tables =
-      at::zeros({members, vocab_size, 3 * size}, grad.options()).index_add_(1, ids, grads[0]);
-  return {grad_tables, grads[1], grads[2]};
+  return {grad_tables, grad_weight, grad_bias};
 }
 
 }  // namespace

@@ -14,6 +14,7 @@ import torch
 from torch import nn
 
 from lanrocli.agent.buffer import ReplayBuffer
+from lanrocli.agent.adam import adam_step
 from lanrocli.agent.encoder import LanguageEncoder, encode
 from lanrocli.agent.noise import restore_generator
 from lanrocli.agent.losses import UpdateTensors, compile_problem, compiled_losses, sac_losses
@@ -94,6 +95,8 @@ class SACAgent:
             learners.append([self.log_alpha])
         groups = [{"params": params, "lr": lr} for params, lr in zip(learners, self._learning_rates())]
         self.optimizer = torch.optim.Adam(groups, fused=True)
+        self._learned = [p for params in learners for p in params]
+        self._polyak_pairs = (list(self.target_critic.parameters()), list(self.critic.parameters()))
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(noise_seed)
         self.updates = 0
@@ -126,7 +129,7 @@ class SACAgent:
         """Normalised observations, the slots that hold objects, and the actor's summary of the sentences."""
         x, present = self._observe(np.asarray(obs["observation"]))
         tokens = self._tensor(obs["instruction"], torch.int64).reshape(x.shape[0], -1)
-        return x, present, self.actor_encoder(tokens)
+        return x, present, encode([self.actor_encoder], tokens)[0]
 
     @torch.no_grad()
     def act(self, obs: Mapping[str, np.ndarray], deterministic: bool = False) -> np.ndarray:
@@ -202,14 +205,15 @@ class SACAgent:
         """Every network's gradient from one backward pass of ``loss``, the optimiser's step, then the target
         critic's."""
         s = self.settings
-        self.optimizer.zero_grad(set_to_none=True)
+        for parameter in self._learned:
+            parameter.grad = None
         loss.backward()
         if s.max_grad_norm is not None:
             nn.utils.clip_grad_norm_(self.critic.parameters(), s.max_grad_norm)
             nn.utils.clip_grad_norm_(self.actor.parameters(), s.max_grad_norm)
-        self.optimizer.step()
+        adam_step(self.optimizer)
         with torch.no_grad():
-            torch._foreach_lerp_(list(self.target_critic.parameters()), list(self.critic.parameters()), 1.0 - s.polyak)
+            torch._foreach_lerp_(*self._polyak_pairs, 1.0 - s.polyak)
         self.updates += 1
 
     def learn(
