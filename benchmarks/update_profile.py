@@ -9,16 +9,57 @@ the operations that take the most time, so that a change to the update is judged
 
 With ``--compile`` the update's losses are compiled (``SACSettings.compile``), the compiling done in the
 warm-up.
+
+Then it times the update's parts one by one (turning the batch into tensors, reading the sentences, the
+losses, the backward pass with the optimiser's step), and counts the eager update's floating-point operations
+(torch's ``FlopCounterMode``, matrix products only, the sentences read in Python, whose arithmetic the C++
+reading repeats): what the update would cost were it arithmetic alone.
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from unittest import mock
+
 import torch
 from torch.profiler import ProfilerActivity, profile
+from torch.utils.flop_counter import FlopCounterMode
 
 from recorded_batches import batch_arguments, compiled_twin, record_batches
+
+from lanrocli.agent import encoder
+from lanrocli.agent.sac import SACAgent
+from lanrocli.agent.transitions import Batch
+
+PARTS = ("tensors", "reading", "losses", "backward and step")
+
+
+def time_parts(agent: SACAgent, batches: list[Batch]) -> dict[str, float]:
+    """ms per update in each part of :meth:`SACAgent.update`, whose steps this makes one by one."""
+    seconds = dict.fromkeys(PARTS, 0.0)
+    for batch in batches:
+        times = [time.perf_counter()]
+        tensors, tokens = agent._update_inputs(batch)
+        times.append(time.perf_counter())
+        summaries = encoder.encode(agent._update_encoders(), tokens)
+        times.append(time.perf_counter())
+        loss, metrics = agent._losses(agent, summaries, tensors, batch.labelled)
+        times.append(time.perf_counter())
+        agent._step(loss)
+        metrics.tolist()
+        times.append(time.perf_counter())
+        for part, begin, end in zip(PARTS, times, times[1:]):
+            seconds[part] += end - begin
+    return {part: total / len(batches) * 1000 for part, total in seconds.items()}
+
+
+def count_flops(agent: SACAgent, batches: list[Batch]) -> float:
+    """Floating-point operations per update (matrix products), the sentences read in Python."""
+    with mock.patch.object(encoder, "native_reader", lambda: None), FlopCounterMode(display=False) as counter:
+        for batch in batches:
+            agent.update(batch)
+    return counter.get_total_flops() / len(batches)
 
 
 def main() -> None:
@@ -30,6 +71,7 @@ def main() -> None:
     torch.set_num_threads(1)
 
     agent, batches = record_batches(args, parser)
+    flops = count_flops(SACAgent.from_state_dict(agent.state_dict()), batches)
     if args.compile:
         agent = compiled_twin(agent)
     for batch in batches[:10]:  # warm-up
@@ -47,6 +89,9 @@ def main() -> None:
     print(f"{args.curriculum}'s agent, stage {args.stage} ({s.architecture}, critics {s.critics}, batch {s.batch_size}, compile {s.compile}): "
           f"{seconds * 1000:.2f} ms per update, {ops / len(batches):.0f} aten operations per update")
     print(events.table(sort_by="self_cpu_time_total", row_limit=args.top))
+    parts = time_parts(agent, batches)
+    print("ms per update by part: " + ", ".join(f"{part} {ms:.2f}" for part, ms in parts.items()) + f"; in all {sum(parts.values()):.2f}")
+    print(f"{flops / 1e6:.1f} million floating-point operations per update (matrix products)")
 
 
 if __name__ == "__main__":

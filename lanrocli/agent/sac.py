@@ -129,7 +129,7 @@ class SACAgent:
         """Normalised observations, the slots that hold objects, and the actor's summary of the sentences."""
         x, present = self._observe(np.asarray(obs["observation"]))
         tokens = self._tensor(obs["instruction"], torch.int64).reshape(x.shape[0], -1)
-        return x, present, encode([self.actor_encoder], tokens)[0]
+        return x, present, self.actor_encoder(tokens)
 
     @torch.no_grad()
     def act(self, obs: Mapping[str, np.ndarray], deterministic: bool = False) -> np.ndarray:
