@@ -12,11 +12,13 @@ warning instead of stopping.
 ``torch.utils.cpp_extension`` builds the library with the machine's C++ compiler and ninja into torch's
 extension folder (``~/.cache/torch_extensions`` unless ``TORCH_EXTENSIONS_DIR`` says otherwise), once per
 machine, torch version and copy of the source; later processes load it in a fraction of a second, and
-processes that start at once (a sweep's trials) wait for one build under torch's file lock.
+processes that start at once (a sweep's trials) wait for one build under an OS lock, which a killed process
+cannot leave behind.
 """
 
 from __future__ import annotations
 
+import fcntl
 import functools
 import hashlib
 import warnings
@@ -28,6 +30,8 @@ import torch
 
 SOURCE = Path(__file__).with_name("gru_steps.cpp")
 LIBRARY = "lanro_gru"  # the operator namespace gru_steps.cpp registers: torch.ops.lanro_gru
+TORCH_LOCK = "lock"  # the file torch.utils.cpp_extension makes in a build folder while it builds or loads
+BUILD_LOCK = "lanro.lock"  # the file whose OS lock lanro holds around that
 
 Reader = Callable[[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, int, int], torch.Tensor]
 
@@ -71,20 +75,37 @@ def _read(
     return _Read.apply(tables, weight_hh, bias_hh, tokens, pad_id, trained if torch.is_grad_enabled() else 0)
 
 
+def library_name() -> str:
+    """One build per source text and place: two installs (a checkout and a wheel) would otherwise take turns
+    rebuilding the one folder, each finding the other's build made from another path."""
+    return f"{LIBRARY}_{hashlib.sha256(SOURCE.read_bytes() + str(SOURCE).encode()).hexdigest()[:12]}"
+
+
+def build_folder() -> Path:
+    """Where torch builds and keeps the library (made if missing)."""
+    from torch.utils import cpp_extension
+
+    return Path(cpp_extension._get_build_directory(library_name(), verbose=False))
+
+
 @functools.cache
 def native_reader() -> Reader | None:
     """The C++ reading for CPU tensors, built or loaded once per process; None, after a warning that says
     why, where it cannot be built."""
     from torch.utils import cpp_extension  # imports setuptools: only when needed
 
-    # One build per source text and place: two installs (a checkout and a wheel) would otherwise take turns
-    # rebuilding the one folder, each finding the other's build made from another path.
-    digest = hashlib.sha256(SOURCE.read_bytes() + str(SOURCE).encode()).hexdigest()[:12]
+    name = library_name()
     try:
-        cpp_extension.load(
-            name=f"{LIBRARY}_{digest}", sources=[str(SOURCE)], extra_cflags=["-O3", "-ffp-contract=off"],
-            is_python_module=False,
-        )
+        folder = build_folder()
+        # torch's own lock is a file that a process killed while holding it leaves behind, and every later
+        # load would wait for it for ever. An OS lock dies with its process: whoever holds this one knows that
+        # no other lanro process is building or loading, so a file of torch's found then is stale.
+        with open(folder / BUILD_LOCK, "a") as guard:
+            fcntl.flock(guard, fcntl.LOCK_EX)
+            (folder / TORCH_LOCK).unlink(missing_ok=True)
+            cpp_extension.load(
+                name=name, sources=[str(SOURCE)], extra_cflags=["-O3", "-ffp-contract=off"], is_python_module=False
+            )
     except (OSError, RuntimeError, ImportError) as error:  # no compiler, no ninja, a failed build
         reason = " ".join(str(error).split())[-300:]  # a failed build's last words are its compiler's
         warnings.warn(

@@ -211,8 +211,8 @@ class SACAgent:
         if s.max_grad_norm is not None:
             nn.utils.clip_grad_norm_(self.critic.parameters(), s.max_grad_norm)
             nn.utils.clip_grad_norm_(self.actor.parameters(), s.max_grad_norm)
-        adam_step(self.optimizer)
         with torch.no_grad():
+            adam_step(self.optimizer)
             torch._foreach_lerp_(*self._polyak_pairs, 1.0 - s.polyak)
         self.updates += 1
 

@@ -3,6 +3,9 @@ trains on with the Python."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 import torch
@@ -105,3 +108,14 @@ def test_a_machine_that_cannot_build_it_is_warned_and_reads_in_python(monkeypatc
     expected = "could not build its C\\+\\+ reading of sentences \\(Ninja is required.*apt-get install g\\+\\+ ninja-build"
     with pytest.warns(RuntimeWarning, match=expected):
         assert native.native_reader.__wrapped__() is None
+
+
+def test_a_lock_left_by_a_process_killed_while_loading_does_not_stop_the_next() -> None:
+    """torch's build lock is a plain file: a process killed while holding it (a run killed in its first
+    update) left it behind, and every later process waited for it for ever."""
+    _built()
+    folder = native.build_folder()
+    (folder / native.TORCH_LOCK).touch()
+    code = "from lanrocli.agent.native import native_reader; assert native_reader() is not None"
+    subprocess.run([sys.executable, "-c", code], timeout=120, check=True)
+    assert not (folder / native.TORCH_LOCK).exists()
