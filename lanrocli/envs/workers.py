@@ -12,6 +12,7 @@ one played in this process, step for step.
 from __future__ import annotations
 
 import multiprocessing
+import multiprocessing.util
 import os
 import signal
 import threading
@@ -55,6 +56,22 @@ def leave_signals_to_parent(parent: int) -> None:
     exit_with_parent(parent)
 
 
+def kill_at_exit(owner: object, processes: list[multiprocessing.Process]) -> None:
+    """Kill ``processes`` when ``owner`` is collected or, at the latest, as this interpreter exits.
+
+    multiprocessing ends daemon children at exit with SIGTERM and then waits for them; workers ignore
+    SIGTERM (:func:`leave_signals_to_parent`), so a script that never closed its environments would wait at
+    exit for ever. This runs first (multiprocessing's finalisers run before it ends children), and killing
+    is safe: a worker holds nothing to save. After a ``close`` it finds nothing left to kill."""
+    multiprocessing.util.Finalize(owner, _kill, args=(processes,), exitpriority=0)
+
+
+def _kill(processes: list[multiprocessing.Process]) -> None:
+    for process in processes:
+        if process.is_alive():
+            process.kill()
+
+
 class WorkerError(RuntimeError):
     """An environment call failed in a worker; the message carries the worker's traceback."""
 
@@ -95,6 +112,7 @@ class EnvWorker:
         self._connection, child = context.Pipe()
         self._process = context.Process(target=_serve, args=(child, make_env, os.getpid()), daemon=True)
         self._process.start()
+        kill_at_exit(self, [self._process])
         child.close()
         self._pending = False
 

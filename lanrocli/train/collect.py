@@ -27,7 +27,7 @@ from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
 from lanrocli.agent.transitions import EpisodeData
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.policies import MistakenPolicy
-from lanrocli.envs.workers import leave_signals_to_parent
+from lanrocli.envs.workers import kill_at_exit, leave_signals_to_parent
 from lanrocli.language import ObjectProps
 from lanrocli.train.checkpoint import state_from_json, state_to_json
 
@@ -191,6 +191,8 @@ class Collector:
         fns = [self._factory(make_env, snapshot, in_subprocess) for snapshot in snapshots]
         vector_cls = AsyncVectorEnv if in_subprocess else SyncVectorEnv
         self.envs = vector_cls(fns, autoreset_mode=AutoresetMode.SAME_STEP)
+        if isinstance(self.envs, AsyncVectorEnv):
+            kill_at_exit(self, list(self.envs.processes))
         self.n_envs = n_envs
         self.task = task
         self._obs, info = self.envs.reset(seed=[seed + i for i in range(n_envs)])

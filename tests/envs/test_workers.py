@@ -4,6 +4,9 @@ process, failures raised here with the worker's traceback, and no worker left be
 from __future__ import annotations
 
 import functools
+import gc
+import subprocess
+import sys
 from collections.abc import Iterator
 
 import numpy as np
@@ -105,3 +108,30 @@ def test_closing_ends_the_worker_even_mid_step() -> None:
     worker.close()
     assert not worker._process.is_alive()
     worker.close()  # twice is harmless
+
+
+NEVER_CLOSED = """
+import functools
+from lanrocli.envs.env import LanroEnv
+from lanrocli.envs.settings import EnvSettings
+from lanrocli.envs.workers import make_envs
+envs = make_envs(functools.partial(LanroEnv, "push", EnvSettings()), 2, in_workers=True)
+print("built", flush=True)
+"""
+
+
+def test_a_script_that_never_closes_its_workers_still_exits() -> None:
+    """Workers ignore SIGTERM, which is how multiprocessing ends daemon children at exit: without the kill at
+    exit this script waits for ever."""
+    done = subprocess.run([sys.executable, "-c", NEVER_CLOSED], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == "built\n"
+
+
+def test_a_worker_dropped_without_closing_is_ended() -> None:
+    worker = make_envs(MAKE, 1, in_workers=True)[0]
+    process = worker._process
+    del worker
+    gc.collect()
+    process.join(timeout=10)
+    assert not process.is_alive()

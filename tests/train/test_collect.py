@@ -1,6 +1,9 @@
-"""Collection: the scripted recoveries a share of correction episodes is acted by."""
+"""Collection: the scripted recoveries a share of correction episodes is acted by, and its subprocesses."""
 
 from __future__ import annotations
+
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -87,3 +90,19 @@ def test_losses_are_kept_per_step_through_a_checkpoints_unfinished_episodes() ->
     restored.restore_partials(older)
     assert not restored.partials()[0]["lost"].any() and restored.partials()[0]["lost"].shape == lost.shape
     restored.close()
+
+
+NEVER_CLOSED = """
+from lanrocli.envs.env import LanroEnv
+from lanrocli.envs.settings import EnvSettings
+from lanrocli.train.collect import Collector
+collector = Collector(lambda: LanroEnv("reach", settings=EnvSettings()), 2, "reach", seed=0)
+print("built", flush=True)
+"""
+
+
+def test_a_script_that_never_closes_its_collector_still_exits() -> None:
+    """The collector's subprocesses ignore SIGTERM as evaluation workers do (``test_workers.py``)."""
+    done = subprocess.run([sys.executable, "-c", NEVER_CLOSED], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == "built\n"
