@@ -75,9 +75,10 @@ def _read(
     return _Read.apply(tables, weight_hh, bias_hh, tokens, pad_id, trained if torch.is_grad_enabled() else 0)
 
 
+@functools.cache
 def library_name() -> str:
     """One build per source text and place: two installs (a checkout and a wheel) would otherwise take turns
-    rebuilding the one folder, each finding the other's build made from another path."""
+    rebuilding the one folder, each finding the other's build made from another path. Read once per process."""
     return f"{LIBRARY}_{hashlib.sha256(SOURCE.read_bytes() + str(SOURCE).encode()).hexdigest()[:12]}"
 
 
