@@ -343,7 +343,7 @@ std::vector<at::Tensor> read_batch_backward(const at::Tensor& grad, const at::Te
 
 }  // namespace
 
-// The namespace is native.py's LIBRARY.
+// The namespace is native.py's READING.name.
 TORCH_LIBRARY(lanro_gru, m) {
   m.def("read(Tensor tables, Tensor weight_hh, Tensor bias_hh, Tensor tokens, int pad_id, int trained, bool keep) "
         "-> Tensor[]",

@@ -20,6 +20,7 @@ from lanrocli.agent.noise import restore_generator
 from lanrocli.agent.losses import UpdateTensors, compile_problem, compiled_losses, sac_losses
 from lanrocli.agent.networks import Actor, Critic, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
+from lanrocli.agent.replay import replayed_gradients
 from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
 from lanrocli.agent.transitions import Batch
 from lanrocli.choices import ActingAttention
@@ -104,6 +105,7 @@ class SACAgent:
         if problem is not None:
             raise ValueError(problem)
         self._losses = compiled_losses() if s.compile else sac_losses
+        self._replay = replayed_gradients(self.device) if s.replay and not s.compile else None
 
     def _learning_rates(self) -> list[float]:
         """Per parameter group of the optimiser: critic, actor, then the temperature when it is tuned."""
@@ -174,9 +176,26 @@ class SACAgent:
         # The critic's, the actor's and the target critic's encoders read this and the next sentences (they
         # nearly always coincide) in one pass.
         summaries = encode(self._update_encoders(), tokens)
-        loss, metrics = self._losses(self, summaries, tensors, batch.labelled)
-        self._step(loss)
+        metrics = self._gradients(summaries, tensors, batch.labelled)
+        self._step()
         return dict(zip(UPDATE_METRICS, metrics.tolist()))
+
+    def _gradients(self, summaries: torch.Tensor, tensors: UpdateTensors, labelled: bool) -> torch.Tensor:
+        """Every learned parameter's gradient of the losses' sum, from one backward pass, in its ``grad``; the
+        update's metrics. Replayed, the losses and their backward pass are the recorded operations, and the
+        reading of the sentences then sends their gradient on to the encoders."""
+        for parameter in self._learned:
+            parameter.grad = None
+        if self._replay is None:
+            loss, metrics = self._losses(self, summaries, tensors, labelled)
+            loss.backward()
+            return metrics
+        gradients, summaries_gradient, metrics = self._replay(self, self._learned, summaries.detach(), tensors, labelled)
+        for parameter, gradient in zip(self._learned, gradients):
+            parameter.grad = gradient
+        if summaries.requires_grad:
+            summaries.backward(summaries_gradient)
+        return metrics
 
     def _update_inputs(self, batch: Batch) -> tuple[UpdateTensors, torch.Tensor]:
         """The batch as the losses read it, and its sentences followed by its next sentences (int64 [2B, L])."""
@@ -201,13 +220,9 @@ class SACAgent:
         summaries: the critic's, the actor's own (if it has one), the target critic's."""
         return [self.critic.encoder, *([self.actor.encoder] if self.actor.encoder is not None else []), self.target_critic.encoder]
 
-    def _step(self, loss: torch.Tensor) -> None:
-        """Every network's gradient from one backward pass of ``loss``, the optimiser's step, then the target
-        critic's."""
+    def _step(self) -> None:
+        """The optimiser's step on the gradients the parameters hold, then the target critic's."""
         s = self.settings
-        for parameter in self._learned:
-            parameter.grad = None
-        loss.backward()
         if s.max_grad_norm is not None:
             nn.utils.clip_grad_norm_(self.critic.parameters(), s.max_grad_norm)
             nn.utils.clip_grad_norm_(self.actor.parameters(), s.max_grad_norm)

@@ -91,6 +91,11 @@ class SACSettings:
     (docs/performance.md). On CPU it needs a C++ compiler. Fused sums round differently in the last bits, so
     a run is reproducible with the setting it ran with."""
 
+    replay: bool = True
+    """On CPU, record the update's losses and their backward pass once and replay the recorded operations from
+    C++ (:mod:`lanrocli.agent.replay`): the same numbers, bit for bit, in about half the time. Python in
+    :func:`~lanrocli.agent.losses.sac_losses` runs only while recording: turn it off to change and debug it."""
+
     ARCHITECTURE: ClassVar[tuple[str, ...]] = (
         "critics", "embedding_size", "language_size", "obs_size", "hidden_size", "hidden_layers", "architecture",
         "share_encoder", "autotune_alpha", "sentence_in_trunk", "see_rest",

@@ -107,7 +107,7 @@ def test_a_machine_that_cannot_build_it_is_warned_and_reads_in_python(monkeypatc
     monkeypatch.setattr(cpp_extension, "load", no_ninja)
     expected = "could not build its C\\+\\+ reading of sentences \\(Ninja is required.*apt-get install g\\+\\+ ninja-build"
     with pytest.warns(RuntimeWarning, match=expected):
-        assert native.native_reader.__wrapped__() is None
+        assert native.load.__wrapped__(native.READING) is None
 
 
 def test_a_lock_left_by_a_process_killed_while_loading_does_not_stop_the_next() -> None:

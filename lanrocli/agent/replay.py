@@ -1,0 +1,158 @@
+"""An update's operations recorded once and replayed from C++ (``replay.cpp``), with the same numbers.
+
+At batch 64 the losses of an update and their backward pass are a few hundred small tensor operations, and on
+CPU each costs more to reach, from Python and through autograd, than to compute. ``make_fx`` records the ATen
+operations one call of a function of tensors runs, the backward pass included where the function asks autograd
+for gradients; replaying that list from C++ runs the same kernels on the same arguments in the same order,
+so it gives the same numbers bit for bit (``tests/agent/test_replay.py`` holds updates to that) in about half
+the time.
+
+A recording stands for the function only as long as nothing the function decided in Python changes: the
+shapes and types of its inputs, and the Python values it read (the agent's settings, whether a batch has
+labels), which is what :class:`ReplayedGradients` keys its recordings by. The function must reach every
+tensor through its inputs: one it found elsewhere would be recorded as the value it had then, so
+:func:`record` refuses a function that reads any. And Python it runs (a print, a branch on a tensor's value)
+runs once, while recording. :attr:`SACSettings.replay <lanrocli.agent.settings.SACSettings.replay>` turns
+the replay off for changing :func:`~lanrocli.agent.losses.sac_losses`.
+"""
+
+from __future__ import annotations
+
+import operator
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import torch
+from torch.fx import Node
+from torch.fx.experimental.proxy_tensor import make_fx
+
+from lanrocli.agent.losses import Learner, UpdateTensors, sac_losses
+from lanrocli.agent.native import REPLAY, load
+
+
+class Recording:
+    """A function of a list of tensors, returning a list of tensors, as the operations one call of it ran."""
+
+    def __init__(self, function: Callable[..., Sequence[torch.Tensor]], inputs: Sequence[torch.Tensor], native: Any) -> None:
+        graph = make_fx(function)(*inputs).graph
+        graph.eliminate_dead_code()
+        constants = [node.target for node in graph.nodes if node.op == "get_attr"]
+        if constants:
+            raise ValueError(f"the recorded function read tensors that are not its inputs ({', '.join(map(str, constants))}); pass them in")
+        slots: dict[Node, int] = {}
+        aliases: dict[Node, Node] = {}  # detach: under no autograd, the tensor itself
+
+        def slot(node: Node) -> int:
+            while node in aliases:
+                node = aliases[node]
+            return slots[node]
+
+        def keep(node: Node) -> int:
+            slots[node] = len(slots)
+            return slots[node]
+
+        inputs_ = [keep(node) for node in graph.nodes if node.op == "placeholder"]
+        calls = []
+        for node in graph.nodes:
+            if node.op != "call_function" or node.target is operator.getitem:
+                continue
+            if node.target is torch.ops.aten.detach.default:
+                aliases[node] = node.args[0]
+                continue
+            schema = node.target._schema
+            returns = [str(r.type) for r in schema.returns]
+            unpack = returns == ["List[Tensor]"]
+            if len(returns) > 1 or unpack:  # the values are taken out by getitem nodes; those nobody takes, dropped
+                taken = {user.args[1]: user for user in node.users if user.target is operator.getitem}
+                results = [keep(taken[k]) if k in taken else -1 for k in range(max(taken, default=-1) + 1 if unpack else len(returns))]
+            else:
+                results = [keep(node)]
+            calls.append((node, schema, results, unpack))
+        (output,) = [node for node in graph.nodes if node.op == "output"]
+        outputs = [slot(node) for node in output.args[0]]
+
+        def argument(value: Any) -> tuple[str, Any]:
+            if isinstance(value, Node):
+                return ("value", slot(value))
+            if isinstance(value, (list, tuple)) and any(isinstance(v, Node) for v in value):
+                return ("values", [slot(v) for v in value])
+            return ("constant", value)
+
+        encoded = []
+        last_read: dict[int, int] = {}
+        for index, (node, schema, results, unpack) in enumerate(calls):
+            arguments = [
+                argument(node.args[i] if i < len(node.args) else node.kwargs.get(a.name, a.default_value))
+                for i, a in enumerate(schema.arguments)
+            ]
+            for kind, value in arguments:
+                for read in [value] if kind == "value" else value if kind == "values" else []:
+                    last_read[read] = index
+            encoded.append((schema.name, schema.overload_name, arguments, results, unpack))
+        released: dict[int, list[int]] = {}
+        for read, index in last_read.items():  # a value goes once no later call reads it
+            if read not in outputs and read not in inputs_:
+                released.setdefault(index, []).append(read)
+        self._program = native.Program(len(slots), inputs_, outputs)
+        for index, (name, overload, arguments, results, unpack) in enumerate(encoded):
+            self._program.add(name, overload, arguments, results, unpack, released.get(index, []))
+
+    def __call__(self, inputs: Sequence[torch.Tensor]) -> list[torch.Tensor]:
+        return self._program.run(list(inputs))
+
+
+class ReplayedGradients:
+    """:func:`~lanrocli.agent.losses.sac_losses` of one agent and the gradients of its sum, recorded on the
+    first batch of each kind and replayed after."""
+
+    def __init__(self, native: Any) -> None:
+        self._native = native
+        self._recordings: dict[tuple[Any, ...], tuple[Recording, list[bool]]] = {}
+
+    def __call__(
+        self, agent: Learner, learned: Sequence[torch.Tensor], summaries: torch.Tensor, batch: UpdateTensors, labelled: bool
+    ) -> tuple[list[torch.Tensor | None], torch.Tensor, torch.Tensor]:
+        """The gradients of the losses' sum for each of ``learned`` (None where it has none) and for
+        ``summaries``, and the update's metrics."""
+        state = [*agent.critic.parameters(), *agent.actor.parameters(), *agent.target_critic.parameters(), agent.log_alpha]
+        present = [value is not None for value in batch]
+        tensors = [value for value in batch if value is not None]
+        key = (agent.settings, labelled, tuple(present), summaries.shape, *((t.shape, t.dtype) for t in tensors))
+        if key not in self._recordings:
+            self._recordings[key] = self._record(agent, learned, state, present, summaries, tensors, labelled)
+        recording, has_gradient = self._recordings[key]
+        *gradients, summaries_gradient, metrics = recording([*state, summaries, *tensors])
+        given = iter(gradients)
+        return [next(given) if has else None for has in has_gradient], summaries_gradient, metrics
+
+    def _record(
+        self,
+        agent: Learner,
+        learned: Sequence[torch.Tensor],
+        state: list[torch.Tensor],
+        present: list[bool],
+        summaries: torch.Tensor,
+        tensors: list[torch.Tensor],
+        labelled: bool,
+    ) -> tuple[Recording, list[bool]]:
+        has_gradient: list[bool] = []
+
+        def gradients(*inputs: torch.Tensor) -> list[torch.Tensor]:
+            summaries, given = inputs[len(state)], iter(inputs[len(state) + 1 :])
+            batch = UpdateTensors(*(next(given) if has else None for has in present))
+            loss, metrics = sac_losses(agent, summaries, batch, labelled)
+            grads = torch.autograd.grad(loss, [*learned, summaries], allow_unused=True)
+            has_gradient[:] = [grad is not None for grad in grads[:-1]]
+            return [*(grad for grad in grads[:-1] if grad is not None), grads[-1], metrics]
+
+        recording = Recording(gradients, [*state, summaries.detach().requires_grad_(), *tensors], self._native)
+        return recording, has_gradient
+
+
+def replayed_gradients(device: torch.device) -> ReplayedGradients | None:
+    """The replay for an agent on ``device``, or None where there is none: on CUDA (recorded and checked on CPU
+    only), or on a machine that cannot build ``replay.cpp`` (warned once)."""
+    if device.type != "cpu":
+        return None
+    native = load(REPLAY)
+    return None if native is None else ReplayedGradients(native)

@@ -1,0 +1,94 @@
+"""Replayed updates leave every weight as updates run from Python do, for every shape of agent; a recording
+refuses what it could not replay faithfully; a machine that cannot build the replay trains on without it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from lanrocli.agent import native, replay
+from lanrocli.agent.sac import SACAgent
+from lanrocli.agent.transitions import Batch
+from lanrocli.language import sample_sentence
+
+from .episodes import OBS_DIM, VOCAB
+from .test_sac import _agent, _batch, _grounding_batch
+
+SHAPES = [
+    {"architecture": "objects", "sentence_in_trunk": False, "critics": 1},  # the shipped curricula's
+    {"architecture": "flat"},
+    {"architecture": "objects", "critics": 2, "see_rest": True},
+    {"architecture": "objects", "share_encoder": True, "clip_target": False, "max_grad_norm": 1.0},
+    {"architecture": "objects", "autotune_alpha": False, "grounding": 0.0, "hidden_layers": 2},
+]
+
+
+def _batches(rng: np.random.Generator, count: int) -> list[Batch]:
+    """Labelled and unlabelled batches in turn (each kind is its own recording), with sentences of every
+    length and ends, failures and multi-step transitions among the rows."""
+    batches = []
+    for k in range(count):
+        batch = _grounding_batch(rng, 64) if k % 3 else _batch(rng, 64)
+        texts = [sample_sentence(rng, "push", corrections=True, negations=True).text for _ in range(128)]
+        batch.instruction, batch.next_instruction = np.split(VOCAB.encode_many(texts), 2)
+        batch.done = rng.random(64) < 0.3
+        batch.failed = rng.random(64) < 0.1
+        batch.steps = rng.integers(1, 4, size=64)
+        batches.append(batch)
+    return batches
+
+
+def _trained(settings: dict[str, object], batches: list[Batch], replayed: bool) -> SACAgent:
+    agent = _agent(seed=5, **settings, replay=replayed)
+    assert (agent._replay is not None) == replayed, "the replay did not build: the tests need a C++ compiler and ninja"
+    agent.update_normalizer(np.random.default_rng(1).normal(size=(50, OBS_DIM)))
+    for batch in batches:
+        agent.update(batch)
+    return agent
+
+
+@pytest.mark.parametrize("settings", SHAPES, ids=lambda settings: ",".join(f"{k}={v}" for k, v in settings.items()))
+def test_replayed_updates_leave_every_weight_and_metric_as_python_does(settings: dict[str, object]) -> None:
+    batches = _batches(np.random.default_rng(0), 12)
+    replayed, python = (_trained(settings, batches, flag) for flag in (True, False))
+    assert len(replayed._replay._recordings) == 2  # one per kind of batch, reused after
+    want, got = python.state_dict(), replayed.state_dict()
+    for network in ("actor", "critic", "target_critic"):
+        for name, value in want[network].items():
+            assert torch.equal(got[network][name], value), f"{network}.{name}"
+    assert torch.equal(got["log_alpha"], want["log_alpha"])
+    moments = [(a["exp_avg"], b["exp_avg"]) for a, b in zip(got["optimizer"]["state"].values(), want["optimizer"]["state"].values())]
+    assert all(torch.equal(a, b) for a, b in moments)
+    extra = _batches(np.random.default_rng(9), 1)[0]
+    assert replayed.update(extra) == python.update(extra)
+
+
+def test_a_recording_replays_on_new_values_and_refuses_a_tensor_that_is_not_an_input() -> None:
+    built = native.load(native.REPLAY)
+    weight = torch.randn(3, 3, requires_grad=True)
+
+    def gradient(x: torch.Tensor, w: torch.Tensor) -> list[torch.Tensor]:
+        return list(torch.autograd.grad((x @ w).tanh().sum(), w))
+
+    recording = replay.Recording(gradient, [torch.randn(4, 3), weight], built)
+    x = torch.randn(4, 3)
+    (want,) = gradient(x, weight)
+    (got,) = recording([x, weight])
+    assert torch.equal(got, want)
+    with pytest.raises(ValueError, match="read tensors that are not its inputs"):
+        replay.Recording(lambda x: [x @ weight.detach()], [x], built)
+
+
+def test_a_machine_that_cannot_build_it_is_warned_and_updates_from_python(monkeypatch: pytest.MonkeyPatch) -> None:
+    from torch.utils import cpp_extension
+
+    def no_compiler(*args: object, **kwargs: object) -> None:
+        raise RuntimeError("Error building extension: g++: not found")
+
+    monkeypatch.setattr(cpp_extension, "load", no_compiler)
+    monkeypatch.setattr(replay, "load", native.load.__wrapped__)  # not the build this process made already
+    with pytest.warns(RuntimeWarning, match="could not build its C\\+\\+ replay of an update's operations \\(.*g\\+\\+: not found"):
+        agent = _agent(architecture="objects")
+    assert agent._replay is None
+    agent.update(_grounding_batch(np.random.default_rng(0), 64))
