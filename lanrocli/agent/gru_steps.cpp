@@ -343,13 +343,18 @@ std::vector<at::Tensor> read_batch_backward(const at::Tensor& grad, const at::Te
 
 }  // namespace
 
-// The namespace is native.py's READING.name.
+// The namespace is native.py's READING.name. The kernels are CPU's, not catch-all ones, so that the operators
+// stay whole where they are recorded (lanrocli/agent/replay.py): a catch-all kernel would be recorded as the
+// calls it makes, with this batch's sentences among their constants.
 TORCH_LIBRARY(lanro_gru, m) {
   m.def("read(Tensor tables, Tensor weight_hh, Tensor bias_hh, Tensor tokens, int pad_id, int trained, bool keep) "
-        "-> Tensor[]",
-        &read_batch);
+        "-> Tensor[]");
   m.def(
       "read_backward(Tensor grad, Tensor weight_hh, Tensor before, Tensor rz, Tensor n, Tensor hidden_n, Tensor ids, "
-      "Tensor active, Tensor sorted_at, Tensor inverse, int members, int vocab_size) -> Tensor[]",
-      &read_batch_backward);
+      "Tensor active, Tensor sorted_at, Tensor inverse, int members, int vocab_size) -> Tensor[]");
+}
+
+TORCH_LIBRARY_IMPL(lanro_gru, CPU, m) {
+  m.impl("read", &read_batch);
+  m.impl("read_backward", &read_batch_backward);
 }

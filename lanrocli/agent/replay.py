@@ -26,8 +26,10 @@ import torch
 from torch.fx import Node
 from torch.fx.experimental.proxy_tensor import make_fx
 
+from lanrocli.agent.encoder import LanguageEncoder, encode, reads_natively
 from lanrocli.agent.losses import Learner, UpdateTensors, sac_losses
 from lanrocli.agent.native import REPLAY, load
+from lanrocli.language import PAD_ID
 
 
 class Recording:
@@ -102,57 +104,56 @@ class Recording:
 
 
 class ReplayedGradients:
-    """:func:`~lanrocli.agent.losses.sac_losses` of one agent and the gradients of its sum, recorded on the
-    first batch of each kind and replayed after."""
+    """An agent's update up to its optimiser's step, recorded on the first batch of each kind and replayed
+    after: the encoders' reading of the batch's sentences (:func:`~lanrocli.agent.encoder.encode`),
+    :func:`~lanrocli.agent.losses.sac_losses`, and the gradients of the losses' sum for the ``learned`` tensors."""
 
-    def __init__(self, native: Any) -> None:
+    def __init__(self, native: Any, agent: Learner, learned: Sequence[torch.Tensor], encoders: Sequence[LanguageEncoder]) -> None:
         self._native = native
+        self._agent, self._learned, self._encoders = agent, list(learned), list(encoders)
+        # Everything the update reads of the agent: its networks (encoders included) and the temperature.
+        self._state = [*agent.critic.parameters(), *agent.actor.parameters(), *agent.target_critic.parameters(), agent.log_alpha]
         self._recordings: dict[tuple[Any, ...], tuple[Recording, list[bool]]] = {}
 
-    def __call__(
-        self, agent: Learner, learned: Sequence[torch.Tensor], summaries: torch.Tensor, batch: UpdateTensors, labelled: bool
-    ) -> tuple[list[torch.Tensor | None], torch.Tensor, torch.Tensor]:
-        """The gradients of the losses' sum for each of ``learned`` (None where it has none) and for
-        ``summaries``, and the update's metrics."""
-        state = [*agent.critic.parameters(), *agent.actor.parameters(), *agent.target_critic.parameters(), agent.log_alpha]
+    def __call__(self, tokens: torch.Tensor, batch: UpdateTensors, labelled: bool) -> tuple[list[torch.Tensor | None], torch.Tensor]:
+        """The gradients for each of ``learned`` (None where it has none), and the update's metrics, of the
+        batch whose sentences and next sentences are ``tokens`` (int64 [2B, L])."""
         present = [value is not None for value in batch]
         tensors = [value for value in batch if value is not None]
-        key = (agent.settings, labelled, tuple(present), summaries.shape, *((t.shape, t.dtype) for t in tensors))
+        # A batch without a word reads as zeros, from which nothing learns: a reading of its own.
+        worded = bool(tokens.ne(PAD_ID).any())
+        key = (self._agent.settings, labelled, worded, tuple(present), tokens.shape, *((t.shape, t.dtype) for t in tensors))
         if key not in self._recordings:
-            self._recordings[key] = self._record(agent, learned, state, present, summaries, tensors, labelled)
+            self._recordings[key] = self._record(present, tokens, tensors, labelled)
         recording, has_gradient = self._recordings[key]
-        *gradients, summaries_gradient, metrics = recording([*state, summaries, *tensors])
+        *gradients, metrics = recording([*self._state, tokens, *tensors])
         given = iter(gradients)
-        return [next(given) if has else None for has in has_gradient], summaries_gradient, metrics
+        return [next(given) if has else None for has in has_gradient], metrics
 
     def _record(
-        self,
-        agent: Learner,
-        learned: Sequence[torch.Tensor],
-        state: list[torch.Tensor],
-        present: list[bool],
-        summaries: torch.Tensor,
-        tensors: list[torch.Tensor],
-        labelled: bool,
+        self, present: list[bool], tokens: torch.Tensor, tensors: list[torch.Tensor], labelled: bool
     ) -> tuple[Recording, list[bool]]:
         has_gradient: list[bool] = []
 
         def gradients(*inputs: torch.Tensor) -> list[torch.Tensor]:
-            summaries, given = inputs[len(state)], iter(inputs[len(state) + 1 :])
+            tokens, given = inputs[len(self._state)], iter(inputs[len(self._state) + 1 :])
             batch = UpdateTensors(*(next(given) if has else None for has in present))
-            loss, metrics = sac_losses(agent, summaries, batch, labelled)
-            grads = torch.autograd.grad(loss, [*learned, summaries], allow_unused=True)
-            has_gradient[:] = [grad is not None for grad in grads[:-1]]
-            return [*(grad for grad in grads[:-1] if grad is not None), grads[-1], metrics]
+            summaries = encode(self._encoders, tokens)
+            loss, metrics = sac_losses(self._agent, summaries, batch, labelled)
+            grads = torch.autograd.grad(loss, self._learned, allow_unused=True)
+            has_gradient[:] = [grad is not None for grad in grads]
+            return [*(grad for grad in grads if grad is not None), metrics]
 
-        recording = Recording(gradients, [*state, summaries.detach().requires_grad_(), *tensors], self._native)
-        return recording, has_gradient
+        return Recording(gradients, [*self._state, tokens, *tensors], self._native), has_gradient
 
 
-def replayed_gradients(device: torch.device) -> ReplayedGradients | None:
-    """The replay for an agent on ``device``, or None where there is none: on CUDA (recorded and checked on CPU
-    only), or on a machine that cannot build ``replay.cpp`` (warned once)."""
-    if device.type != "cpu":
+def replayed_gradients(
+    agent: Learner, learned: Sequence[torch.Tensor], encoders: Sequence[LanguageEncoder], device: torch.device
+) -> ReplayedGradients | None:
+    """The replay of ``agent``'s update on ``device``, or None where there is none: on CUDA (recorded and checked
+    on CPU only), or on a machine that cannot build ``replay.cpp`` or the C++ reading (whose one call a
+    recording holds where the Python reading's steps depend on the batch), each warned once."""
+    if not reads_natively(device):
         return None
     native = load(REPLAY)
-    return None if native is None else ReplayedGradients(native)
+    return None if native is None else ReplayedGradients(native, agent, learned, encoders)

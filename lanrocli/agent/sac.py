@@ -105,7 +105,8 @@ class SACAgent:
         if problem is not None:
             raise ValueError(problem)
         self._losses = compiled_losses() if s.compile else sac_losses
-        self._replay = replayed_gradients(self.device) if s.replay and not s.compile else None
+        replay = s.replay and not s.compile
+        self._replay = replayed_gradients(self, self._learned, self._update_encoders(), self.device) if replay else None
 
     def _learning_rates(self) -> list[float]:
         """Per parameter group of the optimiser: critic, actor, then the temperature when it is tuned."""
@@ -173,28 +174,25 @@ class SACAgent:
         """One SAC update of critic, actor and temperature on ``batch`` (:func:`~lanrocli.agent.losses.sac_losses`),
         then of the target critic."""
         tensors, tokens = self._update_inputs(batch)
-        # The critic's, the actor's and the target critic's encoders read this and the next sentences (they
-        # nearly always coincide) in one pass.
-        summaries = encode(self._update_encoders(), tokens)
-        metrics = self._gradients(summaries, tensors, batch.labelled)
+        metrics = self._gradients(tokens, tensors, batch.labelled)
         self._step()
         return dict(zip(UPDATE_METRICS, metrics.tolist()))
 
-    def _gradients(self, summaries: torch.Tensor, tensors: UpdateTensors, labelled: bool) -> torch.Tensor:
+    def _gradients(self, tokens: torch.Tensor, tensors: UpdateTensors, labelled: bool) -> torch.Tensor:
         """Every learned parameter's gradient of the losses' sum, from one backward pass, in its ``grad``; the
-        update's metrics. Replayed, the losses and their backward pass are the recorded operations, and the
-        reading of the sentences then sends their gradient on to the encoders."""
+        update's metrics. Replayed (:mod:`lanrocli.agent.replay`), they are the recorded operations of this."""
         for parameter in self._learned:
             parameter.grad = None
-        if self._replay is None:
-            loss, metrics = self._losses(self, summaries, tensors, labelled)
-            loss.backward()
+        if self._replay is not None:
+            gradients, metrics = self._replay(tokens, tensors, labelled)
+            for parameter, gradient in zip(self._learned, gradients):
+                parameter.grad = gradient
             return metrics
-        gradients, summaries_gradient, metrics = self._replay(self, self._learned, summaries.detach(), tensors, labelled)
-        for parameter, gradient in zip(self._learned, gradients):
-            parameter.grad = gradient
-        if summaries.requires_grad:
-            summaries.backward(summaries_gradient)
+        # The critic's, the actor's and the target critic's encoders read this and the next sentences (they
+        # nearly always coincide) in one pass.
+        summaries = encode(self._update_encoders(), tokens)
+        loss, metrics = self._losses(self, summaries, tensors, labelled)
+        loss.backward()
         return metrics
 
     def _update_inputs(self, batch: Batch) -> tuple[UpdateTensors, torch.Tensor]:

@@ -10,7 +10,7 @@ import torch
 from lanrocli.agent import native, replay
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.transitions import Batch
-from lanrocli.language import sample_sentence
+from lanrocli.language import PAD_ID, sample_sentence
 
 from .episodes import OBS_DIM, VOCAB
 from .test_sac import _agent, _batch, _grounding_batch
@@ -25,13 +25,15 @@ SHAPES = [
 
 
 def _batches(rng: np.random.Generator, count: int) -> list[Batch]:
-    """Labelled and unlabelled batches in turn (each kind is its own recording), with sentences of every
-    length and ends, failures and multi-step transitions among the rows."""
+    """Labelled and unlabelled batches in turn and one without words (each kind is its own recording), with
+    sentences of every length and ends, failures and multi-step transitions among the rows."""
     batches = []
     for k in range(count):
         batch = _grounding_batch(rng, 64) if k % 3 else _batch(rng, 64)
         texts = [sample_sentence(rng, "push", corrections=True, negations=True).text for _ in range(128)]
         batch.instruction, batch.next_instruction = np.split(VOCAB.encode_many(texts), 2)
+        if k == 7:  # no word at all: it reads as zeros, which nothing learns from
+            batch.instruction[:], batch.next_instruction[:] = PAD_ID, PAD_ID
         batch.done = rng.random(64) < 0.3
         batch.failed = rng.random(64) < 0.1
         batch.steps = rng.integers(1, 4, size=64)
@@ -52,7 +54,7 @@ def _trained(settings: dict[str, object], batches: list[Batch], replayed: bool) 
 def test_replayed_updates_leave_every_weight_and_metric_as_python_does(settings: dict[str, object]) -> None:
     batches = _batches(np.random.default_rng(0), 12)
     replayed, python = (_trained(settings, batches, flag) for flag in (True, False))
-    assert len(replayed._replay._recordings) == 2  # one per kind of batch, reused after
+    assert len(replayed._replay._recordings) == 3  # one per kind of batch, reused after
     want, got = python.state_dict(), replayed.state_dict()
     for network in ("actor", "critic", "target_critic"):
         for name, value in want[network].items():
