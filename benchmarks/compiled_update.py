@@ -71,7 +71,8 @@ def whole_update(agent: SACAgent, compiled: Callable[..., tuple[torch.Tensor, to
     reading."""
     tensors, tokens = agent._update_inputs(batch)
     loss, metrics = compiled(agent, tensors, tokens, batch.labelled)
-    agent._step(loss)
+    agent._backward(loss)
+    agent._step()
     return dict(zip(UPDATE_METRICS, metrics.tolist()))
 
 
@@ -88,7 +89,8 @@ def read_in_advance(agent: SACAgent, batches: list[Batch]) -> Callable[[Batch], 
         tensors, _ = agent._update_inputs(batch)
         read = by_batch[id(batch)].clone().requires_grad_()
         loss, _ = agent._losses(agent, read, tensors, batch.labelled)
-        agent._step(loss)
+        agent._backward(loss)
+        agent._step()
 
     return update
 

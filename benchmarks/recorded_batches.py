@@ -41,8 +41,13 @@ def record_batches(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
     return agent, [trainer.buffer.sample(size, rng, **sampling, gamma=agent.settings.gamma) for _ in range(args.updates)]
 
 
-def compiled_twin(agent: SACAgent) -> SACAgent:
-    """The same agent (weights, optimiser, noise stream), its update's losses compiled (``SACSettings.compile``)."""
+def twin(agent: SACAgent, **settings: object) -> SACAgent:
+    """The same agent (weights, optimiser, noise stream) with these settings changed (``compile``, ``replay``)."""
     state = agent.state_dict()
-    state["settings"] = {**state["settings"], "compile": True}
+    state["settings"] = {**state["settings"], **settings}
     return SACAgent.from_state_dict(state, agent.device)
+
+
+def compiled_twin(agent: SACAgent) -> SACAgent:
+    """The same agent, its update's losses compiled (``SACSettings.compile``)."""
+    return twin(agent, compile=True)

@@ -5,15 +5,16 @@ torch's profiler. Prints the update's mean time, how many tensor operations one 
 the operations that take the most time, so that a change to the update is judged by what it removes.
 
     python benchmarks/update_profile.py --updates 200
-    python benchmarks/update_profile.py --updates 200 --stage 3 [--compile]
+    python benchmarks/update_profile.py --updates 200 --stage 3 [--python | --compile]
 
-With ``--compile`` the update's losses are compiled (``SACSettings.compile``), the compiling done in the
-warm-up.
+The update is the shipped one, its recorded operations replayed from C++ (``SACSettings.replay``); with
+``--python`` it runs from Python through autograd, as it does where the replay cannot be built; with
+``--compile`` the update's losses are compiled (``SACSettings.compile``), the compiling done in the warm-up.
 
-Then it times the update's parts one by one (turning the batch into tensors, reading the sentences, the
-losses, the backward pass with the optimiser's step), and counts the eager update's floating-point operations
-(torch's ``FlopCounterMode``, matrix products only, the sentences read in Python, whose arithmetic the C++
-reading repeats): what the update would cost were it arithmetic alone.
+Then it times the update's parts one by one (turning the batch into tensors; the gradients, replayed, or from
+Python the sentences' reading, the losses and the backward pass; the optimiser's step), and counts the
+update's floating-point operations (torch's ``FlopCounterMode``, matrix products only, the sentences read in
+Python, whose arithmetic the C++ reading repeats): what the update would cost were it arithmetic alone.
 """
 
 from __future__ import annotations
@@ -26,30 +27,34 @@ import torch
 from torch.profiler import ProfilerActivity, profile
 from torch.utils.flop_counter import FlopCounterMode
 
-from recorded_batches import batch_arguments, compiled_twin, record_batches
+from recorded_batches import batch_arguments, record_batches, twin
 
 from lanrocli.agent import encoder
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.transitions import Batch
 
-PARTS = ("tensors", "reading", "losses", "backward and step")
-
-
 def time_parts(agent: SACAgent, batches: list[Batch]) -> dict[str, float]:
     """ms per update in each part of :meth:`SACAgent.update`, whose steps this makes one by one."""
-    seconds = dict.fromkeys(PARTS, 0.0)
+    replayed = agent._replay is not None
+    parts = ("tensors", "gradients", "step") if replayed else ("tensors", "reading", "losses", "backward and step")
+    seconds = dict.fromkeys(parts, 0.0)
     for batch in batches:
         times = [time.perf_counter()]
         tensors, tokens = agent._update_inputs(batch)
         times.append(time.perf_counter())
-        summaries = encoder.encode(agent._update_encoders(), tokens)
-        times.append(time.perf_counter())
-        loss, metrics = agent._losses(agent, summaries, tensors, batch.labelled)
-        times.append(time.perf_counter())
-        agent._step(loss)
+        if replayed:
+            metrics = agent._gradients(tokens, tensors, batch.labelled)
+            times.append(time.perf_counter())
+        else:  # the backward pass and the step are one part
+            summaries = encoder.encode(agent._update_encoders(), tokens)
+            times.append(time.perf_counter())
+            loss, metrics = agent._losses(agent, summaries, tensors, batch.labelled)
+            times.append(time.perf_counter())
+            agent._backward(loss)
+        agent._step()
         metrics.tolist()
         times.append(time.perf_counter())
-        for part, begin, end in zip(PARTS, times, times[1:]):
+        for part, begin, end in zip(parts, times, times[1:]):
             seconds[part] += end - begin
     return {part: total / len(batches) * 1000 for part, total in seconds.items()}
 
@@ -66,14 +71,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     batch_arguments(parser, stage=1, updates=200)
     parser.add_argument("--top", type=int, default=15)
-    parser.add_argument("--compile", action="store_true", help="the update's losses compiled (SACSettings.compile)")
+    how = parser.add_mutually_exclusive_group()
+    how.add_argument("--python", action="store_true", help="the update run from Python (SACSettings.replay false)")
+    how.add_argument("--compile", action="store_true", help="the update's losses compiled (SACSettings.compile)")
     args = parser.parse_args()
     torch.set_num_threads(1)
 
     agent, batches = record_batches(args, parser)
-    flops = count_flops(SACAgent.from_state_dict(agent.state_dict()), batches)
-    if args.compile:
-        agent = compiled_twin(agent)
+    flops = count_flops(twin(agent, replay=False), batches)
+    if args.compile or args.python:
+        agent = twin(agent, compile=args.compile, replay=not args.python)
     for batch in batches[:10]:  # warm-up
         agent.update(batch)
     start = time.perf_counter()
@@ -86,7 +93,7 @@ def main() -> None:
     events = prof.key_averages()
     ops = sum(e.count for e in events if e.key.startswith("aten::"))
     s = agent.settings
-    print(f"{args.curriculum}'s agent, stage {args.stage} ({s.architecture}, critics {s.critics}, batch {s.batch_size}, compile {s.compile}): "
+    print(f"{args.curriculum}'s agent, stage {args.stage} ({s.architecture}, critics {s.critics}, batch {s.batch_size}, compile {s.compile}, replayed {agent._replay is not None}): "
           f"{seconds * 1000:.2f} ms per update, {ops / len(batches):.0f} aten operations per update")
     print(events.table(sort_by="self_cpu_time_total", row_limit=args.top))
     parts = time_parts(agent, batches)

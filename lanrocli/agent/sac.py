@@ -181,8 +181,6 @@ class SACAgent:
     def _gradients(self, tokens: torch.Tensor, tensors: UpdateTensors, labelled: bool) -> torch.Tensor:
         """Every learned parameter's gradient of the losses' sum, from one backward pass, in its ``grad``; the
         update's metrics. Replayed (:mod:`lanrocli.agent.replay`), they are the recorded operations of this."""
-        for parameter in self._learned:
-            parameter.grad = None
         if self._replay is not None:
             gradients, metrics = self._replay(tokens, tensors, labelled)
             for parameter, gradient in zip(self._learned, gradients):
@@ -192,8 +190,14 @@ class SACAgent:
         # nearly always coincide) in one pass.
         summaries = encode(self._update_encoders(), tokens)
         loss, metrics = self._losses(self, summaries, tensors, labelled)
-        loss.backward()
+        self._backward(loss)
         return metrics
+
+    def _backward(self, loss: torch.Tensor) -> None:
+        """Every learned parameter's gradient of ``loss``, from one backward pass, in its ``grad``."""
+        for parameter in self._learned:
+            parameter.grad = None
+        loss.backward()
 
     def _update_inputs(self, batch: Batch) -> tuple[UpdateTensors, torch.Tensor]:
         """The batch as the losses read it, and its sentences followed by its next sentences (int64 [2B, L])."""
