@@ -32,7 +32,7 @@ struct Call {
   std::vector<Argument> arguments;
   std::vector<int64_t> results;  // where each value the operator returns is kept
   bool unpack = false;           // the operator returns one list of tensors, whose elements go to `results`
-  std::vector<int64_t> released;  // values no later call reads, dropped after this one
+  std::vector<int64_t> freed;  // values no later call reads, dropped after this one
 };
 
 // A constant as the dispatcher takes it. A Python number where the schema asks for a tensor becomes what
@@ -54,12 +54,12 @@ class Program {
   // `arguments`: per argument of the operator's schema, in order, a pair (kind, payload): ("value", slot),
   // ("values", [slots]) or ("constant", a Python value, converted by the argument's type in the schema).
   void add(const std::string& name, const std::string& overload, const py::list& arguments,
-           std::vector<int64_t> results, bool unpack, std::vector<int64_t> released) {
+           std::vector<int64_t> results, bool unpack, std::vector<int64_t> freed) {
     const c10::OperatorHandle op = c10::Dispatcher::singleton().findSchemaOrThrow(name.c_str(), overload.c_str());
     const auto& schema = op.schema().arguments();
     TORCH_CHECK(arguments.size() == schema.size(), name, ".", overload, " takes ", schema.size(), " arguments, not ",
                 arguments.size());
-    Call call{op, {}, std::move(results), unpack, std::move(released)};
+    Call call{op, {}, std::move(results), unpack, std::move(freed)};
     for (size_t i = 0; i < schema.size(); ++i) {
       const auto pair = arguments[i].cast<py::tuple>();
       const auto kind = pair[0].cast<std::string>();
@@ -115,7 +115,7 @@ class Program {
         for (size_t k = 0; k < call.results.size(); ++k)
           if (call.results[k] >= 0) values[call.results[k]] = std::move(stack[k]);
       }
-      for (const int64_t slot : call.released) values[slot] = c10::IValue();
+      for (const int64_t slot : call.freed) values[slot] = c10::IValue();
     }
     std::vector<at::Tensor> outputs;
     outputs.reserve(outputs_.size());

@@ -18,12 +18,13 @@ the replay off for changing :func:`~lanrocli.agent.losses.sac_losses`.
 
 from __future__ import annotations
 
+import copy
 import operator
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import torch
-from torch.fx import Node
+from torch.fx import Graph, Node
 from torch.fx.experimental.proxy_tensor import make_fx
 
 from lanrocli.agent.encoder import LanguageEncoder, encode, reads_natively
@@ -41,66 +42,70 @@ class Recording:
         constants = [node.target for node in graph.nodes if node.op == "get_attr"]
         if constants:
             raise ValueError(f"the recorded function read tensors that are not its inputs ({', '.join(map(str, constants))}); pass them in")
-        slots: dict[Node, int] = {}
-        aliases: dict[Node, Node] = {}  # detach: under no autograd, the tensor itself
-
-        def slot(node: Node) -> int:
-            while node in aliases:
-                node = aliases[node]
-            return slots[node]
-
-        def keep(node: Node) -> int:
-            slots[node] = len(slots)
-            return slots[node]
-
-        inputs_ = [keep(node) for node in graph.nodes if node.op == "placeholder"]
-        calls = []
-        for node in graph.nodes:
-            if node.op != "call_function" or node.target is operator.getitem:
-                continue
-            if node.target is torch.ops.aten.detach.default:
-                aliases[node] = node.args[0]
-                continue
-            schema = node.target._schema
-            returns = [str(r.type) for r in schema.returns]
-            unpack = returns == ["List[Tensor]"]
-            if len(returns) > 1 or unpack:  # the values are taken out by getitem nodes; those nobody takes, dropped
-                taken = {user.args[1]: user for user in node.users if user.target is operator.getitem}
-                results = [keep(taken[k]) if k in taken else -1 for k in range(max(taken, default=-1) + 1 if unpack else len(returns))]
-            else:
-                results = [keep(node)]
-            calls.append((node, schema, results, unpack))
-        (output,) = [node for node in graph.nodes if node.op == "output"]
-        outputs = [slot(node) for node in output.args[0]]
-
-        def argument(value: Any) -> tuple[str, Any]:
-            if isinstance(value, Node):
-                return ("value", slot(value))
-            if isinstance(value, (list, tuple)) and any(isinstance(v, Node) for v in value):
-                return ("values", [slot(v) for v in value])
-            return ("constant", value)
-
-        encoded = []
-        last_read: dict[int, int] = {}
-        for index, (node, schema, results, unpack) in enumerate(calls):
-            arguments = [
-                argument(node.args[i] if i < len(node.args) else node.kwargs.get(a.name, a.default_value))
-                for i, a in enumerate(schema.arguments)
-            ]
-            for kind, value in arguments:
-                for read in [value] if kind == "value" else value if kind == "values" else []:
-                    last_read[read] = index
-            encoded.append((schema.name, schema.overload_name, arguments, results, unpack))
-        released: dict[int, list[int]] = {}
-        for read, index in last_read.items():  # a value goes once no later call reads it
-            if read not in outputs and read not in inputs_:
-                released.setdefault(index, []).append(read)
-        self._program = native.Program(len(slots), inputs_, outputs)
-        for index, (name, overload, arguments, results, unpack) in enumerate(encoded):
-            self._program.add(name, overload, arguments, results, unpack, released.get(index, []))
+        self._program = _program(graph, native)
 
     def __call__(self, inputs: Sequence[torch.Tensor]) -> list[torch.Tensor]:
         return self._program.run(list(inputs))
+
+
+def _program(graph: Graph, native: Any) -> Any:
+    """``graph``'s calls as the native ``Program`` replays them: every value a numbered slot, each call the
+    operator, its arguments (slots, lists of slots, constants) in its schema's order, the slots its results go
+    to, and the slots no later call reads, which it frees."""
+    slots: dict[Node, int] = {}
+    aliases: dict[Node, Node] = {}  # detach: replayed without autograd, the tensor itself
+
+    def slot(node: Node) -> int:
+        while node in aliases:
+            node = aliases[node]
+        return slots[node]
+
+    def keep(node: Node) -> int:
+        slots[node] = len(slots)
+        return slots[node]
+
+    def argument(value: Any) -> tuple[str, Any]:
+        if isinstance(value, Node):
+            return ("value", slot(value))
+        if isinstance(value, (list, tuple)) and any(isinstance(v, Node) for v in value):
+            return ("values", [slot(v) for v in value])
+        return ("constant", value)
+
+    inputs = [keep(node) for node in graph.nodes if node.op == "placeholder"]
+    calls = []
+    for node in graph.nodes:
+        if node.op != "call_function" or node.target is operator.getitem:
+            continue
+        if node.target is torch.ops.aten.detach.default:
+            aliases[node] = node.args[0]
+            continue
+        schema = node.target._schema
+        returns = [str(r.type) for r in schema.returns]
+        unpack = returns == ["List[Tensor]"]
+        if len(returns) > 1 or unpack:  # getitem nodes take the values out; those none takes are dropped (-1)
+            taken = {user.args[1]: user for user in node.users if user.target is operator.getitem}
+            count = max(taken, default=-1) + 1 if unpack else len(returns)
+            results = [keep(taken[k]) if k in taken else -1 for k in range(count)]
+        else:
+            results = [keep(node)]
+        given = [node.args[i] if i < len(node.args) else node.kwargs.get(a.name, a.default_value) for i, a in enumerate(schema.arguments)]
+        calls.append((schema, [argument(value) for value in given], results, unpack))
+    (output,) = [node for node in graph.nodes if node.op == "output"]
+    outputs = [slot(node) for node in output.args[0]]
+
+    last_read = {}
+    for index, (_, arguments, _, _) in enumerate(calls):
+        for kind, value in arguments:
+            for read in [value] if kind == "value" else value if kind == "values" else []:
+                last_read[read] = index
+    freed: dict[int, list[int]] = {}
+    for read, index in last_read.items():
+        if read not in outputs and read not in inputs:
+            freed.setdefault(index, []).append(read)
+    program = native.Program(len(slots), inputs, outputs)
+    for index, (schema, arguments, results, unpack) in enumerate(calls):
+        program.add(schema.name, schema.overload_name, arguments, results, unpack, freed.get(index, []))
+    return program
 
 
 class ReplayedGradients:
@@ -114,6 +119,17 @@ class ReplayedGradients:
         # Everything the update reads of the agent: its networks (encoders included) and the temperature.
         self._state = [*agent.critic.parameters(), *agent.actor.parameters(), *agent.target_critic.parameters(), agent.log_alpha]
         self._recordings: dict[tuple[Any, ...], tuple[Recording, list[bool]]] = {}
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> ReplayedGradients:
+        """A copy of the agent gets a replay of its own, which records anew: a recording holds the tensors of
+        the agent it was made for."""
+        copied = ReplayedGradients.__new__(ReplayedGradients)
+        copied._native, copied._recordings = self._native, {}
+        # Through the memo, to the copy's own tensors (which may not be whole yet: no attribute is read here).
+        copied._agent, copied._learned, copied._encoders, copied._state = (
+            copy.deepcopy(x, memo) for x in (self._agent, self._learned, self._encoders, self._state)
+        )
+        return copied
 
     def __call__(self, tokens: torch.Tensor, batch: UpdateTensors, labelled: bool) -> tuple[list[torch.Tensor | None], torch.Tensor]:
         """The gradients for each of ``learned`` (None where it has none), and the update's metrics, of the

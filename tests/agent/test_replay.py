@@ -3,6 +3,8 @@ refuses what it could not replay faithfully; a machine that cannot build the rep
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 import torch
@@ -63,7 +65,9 @@ def test_replayed_updates_leave_every_weight_and_metric_as_python_does(settings:
     moments = [(a["exp_avg"], b["exp_avg"]) for a, b in zip(got["optimizer"]["state"].values(), want["optimizer"]["state"].values())]
     assert all(torch.equal(a, b) for a, b in moments)
     extra = _batches(np.random.default_rng(9), 1)[0]
-    assert replayed.update(extra) == python.update(extra)
+    copied = copy.deepcopy(replayed)  # records anew, for its own tensors
+    assert replayed.update(extra) == python.update(extra) == copied.update(extra)
+    assert all(torch.equal(a, b) for a, b in zip(copied.actor.parameters(), replayed.actor.parameters()))
 
 
 def test_a_recording_replays_on_new_values_and_refuses_a_tensor_that_is_not_an_input() -> None:
