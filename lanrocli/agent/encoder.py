@@ -10,7 +10,7 @@ import torch
 from torch import nn
 
 from lanrocli.agent.gru import read_sentences
-from lanrocli.agent.native import native_reader
+from lanrocli.agent.native import Reader, native_reader
 from lanrocli.language import PAD_ID
 
 
@@ -53,16 +53,17 @@ def encode(encoders: Sequence[LanguageEncoder], tokens: torch.Tensor) -> torch.T
     tables, weight_hh, bias_hh = stacked_gates(encoders)
     learning = [any(p.requires_grad for p in encoder.parameters()) for encoder in encoders]
     trained = sum(learning) if learning == sorted(learning, reverse=True) else len(encoders)  # learning ones first
-    if reads_natively(tokens.device):  # the same numbers, one C++ call each way
-        return native_reader()(tables, weight_hh, bias_hh, tokens, PAD_ID, trained)
+    reader = native_reading(tokens.device)
+    if reader is not None:  # the same numbers, one C++ call each way
+        return reader(tables, weight_hh, bias_hh, tokens, PAD_ID, trained)
     sentences, inverse = _distinct(tokens, encoders[0].vocab_size)
     return read_sentences(tables, weight_hh, bias_hh, sentences, PAD_ID, trained).index_select(1, inverse)
 
 
-def reads_natively(device: torch.device) -> bool:
-    """Whether :func:`encode` reads on ``device`` in C++ (:func:`~lanrocli.agent.native.native_reader`): on CPU,
-    where the machine could build it."""
-    return device.type == "cpu" and native_reader() is not None
+def native_reading(device: torch.device) -> Reader | None:
+    """The C++ reading :func:`encode` reads with on ``device`` (:func:`~lanrocli.agent.native.native_reader`): on
+    CPU, where the machine could build it; else None."""
+    return native_reader() if device.type == "cpu" else None
 
 
 def _distinct(tokens: torch.Tensor, vocab_size: int) -> tuple[torch.Tensor, torch.Tensor]:

@@ -1,19 +1,19 @@
 """An update's operations recorded once and replayed from C++ (``replay.cpp``), with the same numbers.
 
-At batch 64 the losses of an update and their backward pass are a few hundred small tensor operations, and on
-CPU each costs more to reach, from Python and through autograd, than to compute. ``make_fx`` records the ATen
-operations one call of a function of tensors runs, the backward pass included where the function asks autograd
-for gradients; replaying that list from C++ runs the same kernels on the same arguments in the same order,
-so it gives the same numbers bit for bit (``tests/agent/test_replay.py`` holds updates to that) in about half
-the time.
+At batch 64 an update's reading of its sentences, its losses and their backward pass are a few hundred small
+tensor operations, and on CPU each costs more to reach, from Python and through autograd, than to compute.
+``make_fx`` records the ATen operations one call of a function of tensors runs, the backward pass included
+where the function asks autograd for gradients; replaying that list from C++ runs the same kernels on the
+same arguments in the same order, so it gives the same numbers bit for bit (``tests/agent/test_replay.py``
+holds updates to that), without the interpreter and autograd between the calls.
 
 A recording stands for the function only as long as nothing the function decided in Python changes: the
 shapes and types of its inputs, and the Python values it read (the agent's settings, whether a batch has
-labels), which is what :class:`ReplayedGradients` keys its recordings by. The function must reach every
-tensor through its inputs: one it found elsewhere would be recorded as the value it had then, so
-:func:`record` refuses a function that reads any. And Python it runs (a print, a branch on a tensor's value)
-runs once, while recording. :attr:`SACSettings.replay <lanrocli.agent.settings.SACSettings.replay>` turns
-the replay off for changing :func:`~lanrocli.agent.losses.sac_losses`.
+labels and words), which is what :class:`ReplayedGradients` keys its recordings by. The function must reach
+every tensor through its inputs: one it found elsewhere would be recorded as the value it had then, so
+:class:`Recording` refuses a function that reads any. And Python it runs (a print, a branch on a tensor's
+value) runs once, while recording. :attr:`SACSettings.replay <lanrocli.agent.settings.SACSettings.replay>`
+turns the replay off for changing :func:`~lanrocli.agent.losses.sac_losses`.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import torch
 from torch.fx import Graph, Node
 from torch.fx.experimental.proxy_tensor import make_fx
 
-from lanrocli.agent.encoder import LanguageEncoder, encode, reads_natively
+from lanrocli.agent.encoder import LanguageEncoder, encode, native_reading
 from lanrocli.agent.losses import Learner, UpdateTensors, sac_losses
 from lanrocli.agent.native import REPLAY, load
 from lanrocli.language import PAD_ID
@@ -169,7 +169,7 @@ def replayed_gradients(
     """The replay of ``agent``'s update on ``device``, or None where there is none: on CUDA (recorded and checked
     on CPU only), or on a machine that cannot build ``replay.cpp`` or the C++ reading (whose one call a
     recording holds where the Python reading's steps depend on the batch), each warned once."""
-    if not reads_natively(device):
+    if native_reading(device) is None:
         return None
     native = load(REPLAY)
     return None if native is None else ReplayedGradients(native, agent, learned, encoders)

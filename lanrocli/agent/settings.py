@@ -92,8 +92,8 @@ class SACSettings:
     a run is reproducible with the setting it ran with."""
 
     replay: bool = True
-    """On CPU, record the update's losses and their backward pass once and replay the recorded operations from
-    C++ (:mod:`lanrocli.agent.replay`): the same numbers, bit for bit, in about half the time. Python in
+    """On CPU, record an update's reading, losses and backward pass once and replay the recorded operations from
+    C++ (:mod:`lanrocli.agent.replay`): the same numbers, bit for bit, faster (docs/performance.md). Python in
     :func:`~lanrocli.agent.losses.sac_losses` runs only while recording: turn it off to change and debug it."""
 
     ARCHITECTURE: ClassVar[tuple[str, ...]] = (
