@@ -37,9 +37,9 @@ def main() -> None:
 
     agent, batches = record_batches(args, parser)
     agents = {"python": twin(agent, replay=False), "replayed": twin(agent, replay=True)}
+    metrics = {name: [a.update(batch) for batch in batches[:5]] for name, a in agents.items()}  # warm-up, recording
     if agents["replayed"]._replay is None:
         parser.error("the replay could not be built here (see the warning)")
-    metrics = {name: [a.update(batch) for batch in batches[:5]] for name, a in agents.items()}  # warm-up, recording
     times: dict[str, list[float]] = {name: [] for name in agents}
     for round_ in range(1, args.rounds + 1):
         for name, a in agents.items():

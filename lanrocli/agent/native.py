@@ -34,7 +34,6 @@ TORCH_LOCK = "lock"  # the file torch.utils.cpp_extension makes in a build folde
 BUILD_LOCK = "lanro.lock"  # the file whose OS lock lanro holds around that
 
 
-
 @dataclass(frozen=True)
 class Library:
     """One C++ source of the package: ``name`` prefixes its builds' names; ``what`` and ``instead`` say, in the

@@ -6,8 +6,6 @@
 // the same numbers bit for bit, without the interpreter or autograd between them.
 
 #include <ATen/core/dispatch/Dispatcher.h>
-#include <c10/core/InferenceMode.h>
-#include <torch/csrc/autograd/grad_mode.h>
 #include <torch/csrc/jit/python/pybind_utils.h>
 #include <torch/extension.h>
 
@@ -23,7 +21,8 @@ namespace {
 struct Argument {
   enum class Kind { Value, Values, Constant } kind;
   int64_t slot = -1;
-  std::vector<int64_t> slots;
+  std::vector<int64_t> slots;  // -1 for an optional tensor left out
+  bool optional = false;       // the list is of optional tensors (Tensor?[])
   c10::IValue constant;
 };
 
@@ -49,7 +48,10 @@ c10::IValue constant(const py::handle& value, const c10::TypePtr& type) {
 class Program {
  public:
   Program(int64_t slots, std::vector<int64_t> inputs, std::vector<int64_t> outputs)
-      : slots_(slots), inputs_(std::move(inputs)), outputs_(std::move(outputs)) {}
+      : slots_(slots), inputs_(std::move(inputs)), outputs_(std::move(outputs)) {
+    for (const auto* slots_of : {&inputs_, &outputs_})
+      for (const int64_t slot : *slots_of) TORCH_CHECK(slot >= 0 && slot < slots_, "slot ", slot, " out of range");
+  }
 
   // `arguments`: per argument of the operator's schema, in order, a pair (kind, payload): ("value", slot),
   // ("values", [slots]) or ("constant", a Python value, converted by the argument's type in the schema).
@@ -70,6 +72,8 @@ class Program {
       } else if (kind == "values") {
         argument.kind = Argument::Kind::Values;
         argument.slots = pair[1].cast<std::vector<int64_t>>();
+        const auto list = schema[i].type()->cast<c10::ListType>();
+        argument.optional = list && list->getElementType()->kind() == c10::TypeKind::OptionalType;
       } else {
         TORCH_CHECK(kind == "constant", "unknown argument kind ", kind);
         argument.kind = Argument::Kind::Constant;
@@ -77,6 +81,16 @@ class Program {
       }
       call.arguments.push_back(std::move(argument));
     }
+    // A slot out of range would read or write past the values: checked once here, not at every replay.
+    const auto check = [&](int64_t slot, bool may_be_absent) {
+      TORCH_CHECK(slot < slots_ && (slot >= 0 || (may_be_absent && slot == -1)), name, ": slot ", slot, " out of range");
+    };
+    for (const Argument& argument : call.arguments) {
+      if (argument.kind == Argument::Kind::Value) check(argument.slot, false);
+      for (const int64_t slot : argument.slots) check(slot, argument.optional);
+    }
+    for (const int64_t slot : call.results) check(slot, true);
+    for (const int64_t slot : call.freed) check(slot, false);
     calls_.push_back(std::move(call));
   }
 
@@ -94,19 +108,27 @@ class Program {
           case Argument::Kind::Value:
             stack.push_back(values[argument.slot]);
             break;
-          case Argument::Kind::Values: {
-            c10::List<at::Tensor> list;
-            list.reserve(argument.slots.size());
-            for (const int64_t slot : argument.slots) list.push_back(values[slot].toTensor());
-            stack.emplace_back(std::move(list));
+          case Argument::Kind::Values:
+            if (argument.optional) {
+              c10::List<std::optional<at::Tensor>> list;
+              for (const int64_t slot : argument.slots)
+                list.push_back(slot < 0 ? std::nullopt : std::optional<at::Tensor>(values[slot].toTensor()));
+              stack.emplace_back(std::move(list));
+            } else {
+              c10::List<at::Tensor> list;
+              list.reserve(argument.slots.size());
+              for (const int64_t slot : argument.slots) list.push_back(values[slot].toTensor());
+              stack.emplace_back(std::move(list));
+            }
             break;
-          }
           case Argument::Kind::Constant:
             stack.push_back(argument.constant);
             break;
         }
       }
       call.op.callBoxed(stack);
+      TORCH_CHECK(call.unpack || stack.size() >= call.results.size(), call.op.schema().name(), " returned ",
+                  stack.size(), " values, not ", call.results.size());
       if (call.unpack) {
         const c10::List<at::Tensor> list = stack[0].toTensorList();
         for (size_t k = 0; k < call.results.size(); ++k)

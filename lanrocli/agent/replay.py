@@ -11,9 +11,10 @@ A recording stands for the function only as long as nothing the function decided
 shapes and types of its inputs, and the Python values it read (the agent's settings, whether a batch has
 labels and words), which is what :class:`ReplayedGradients` keys its recordings by. The function must reach
 every tensor through its inputs: one it found elsewhere would be recorded as the value it had then, so
-:class:`Recording` refuses a function that reads any. And Python it runs (a print, a branch on a tensor's
-value) runs once, while recording. :attr:`SACSettings.replay <lanrocli.agent.settings.SACSettings.replay>`
-turns the replay off for changing :func:`~lanrocli.agent.losses.sac_losses`.
+:class:`Recording` refuses a function that reads any. Its Python runs once, while recording: a print prints
+once, and a branch on a tensor's value cannot be recorded at all (the recording fails and says so).
+:attr:`SACSettings.replay <lanrocli.agent.settings.SACSettings.replay>` turns the replay off for changing
+:func:`~lanrocli.agent.losses.sac_losses`.
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ from lanrocli.language import PAD_ID
 
 
 class Recording:
-    """A function of a list of tensors, returning a list of tensors, as the operations one call of it ran."""
+    """A function of tensors (one argument each), returning a list of tensors, as the operations one call of
+    it ran."""
 
     def __init__(self, function: Callable[..., Sequence[torch.Tensor]], inputs: Sequence[torch.Tensor], native: Any) -> None:
         graph = make_fx(function)(*inputs).graph
@@ -68,7 +70,7 @@ def _program(graph: Graph, native: Any) -> Any:
         if isinstance(value, Node):
             return ("value", slot(value))
         if isinstance(value, (list, tuple)) and any(isinstance(v, Node) for v in value):
-            return ("values", [slot(v) for v in value])
+            return ("values", [-1 if v is None else slot(v) for v in value])  # None: an optional tensor left out
         return ("constant", value)
 
     inputs = [keep(node) for node in graph.nodes if node.op == "placeholder"]
@@ -87,17 +89,20 @@ def _program(graph: Graph, native: Any) -> Any:
             count = max(taken, default=-1) + 1 if unpack else len(returns)
             results = [keep(taken[k]) if k in taken else -1 for k in range(count)]
         else:
-            results = [keep(node)]
+            results = [keep(node)] if returns else []
         given = [node.args[i] if i < len(node.args) else node.kwargs.get(a.name, a.default_value) for i, a in enumerate(schema.arguments)]
         calls.append((schema, [argument(value) for value in given], results, unpack))
     (output,) = [node for node in graph.nodes if node.op == "output"]
     outputs = [slot(node) for node in output.args[0]]
+    if len(set(outputs)) < len(outputs):  # the replay would hand out one tensor twice, where Python gives two
+        raise ValueError("the recorded function returns one tensor in two places; return each once")
 
     last_read = {}
     for index, (_, arguments, _, _) in enumerate(calls):
         for kind, value in arguments:
             for read in [value] if kind == "value" else value if kind == "values" else []:
-                last_read[read] = index
+                if read >= 0:
+                    last_read[read] = index
     freed: dict[int, list[int]] = {}
     for read, index in last_read.items():
         if read not in outputs and read not in inputs:
@@ -116,7 +121,8 @@ class ReplayedGradients:
     def __init__(self, native: Any, agent: Learner, learned: Sequence[torch.Tensor], encoders: Sequence[LanguageEncoder]) -> None:
         self._native = native
         self._agent, self._learned, self._encoders = agent, list(learned), list(encoders)
-        # Everything the update reads of the agent: its networks (encoders included) and the temperature.
+        # Everything the update reads of the agent: its networks (encoders included) and the temperature, taken
+        # once: the optimiser and load_state_dict change them in place, as they must for a replay to see it.
         self._state = [*agent.critic.parameters(), *agent.actor.parameters(), *agent.target_critic.parameters(), agent.log_alpha]
         self._recordings: dict[tuple[Any, ...], tuple[Recording, list[bool]]] = {}
 
@@ -138,6 +144,7 @@ class ReplayedGradients:
         tensors = [value for value in batch if value is not None]
         # A batch without a word reads as zeros, from which nothing learns: a reading of its own.
         worded = bool(tokens.ne(PAD_ID).any())
+        # All the settings, though acting's (act_by) never reach the losses: a recording more is cheap.
         key = (self._agent.settings, labelled, worded, tuple(present), tokens.shape, *((t.shape, t.dtype) for t in tensors))
         if key not in self._recordings:
             self._recordings[key] = self._record(present, tokens, tensors, labelled)
@@ -160,7 +167,13 @@ class ReplayedGradients:
             has_gradient[:] = [grad is not None for grad in grads]
             return [*(grad for grad in grads if grad is not None), metrics]
 
-        return Recording(gradients, [*self._state, tokens, *tensors], self._native), has_gradient
+        try:
+            return Recording(gradients, [*self._state, tokens, *tensors], self._native), has_gradient
+        except RuntimeError as error:  # a branch on a tensor's value, most likely: Python that needs the values
+            raise RuntimeError(
+                f"the update could not be recorded for its replay ({error}); sac_losses and the networks must be "
+                "functions of tensors without branches on their values, or set agent.replay: false to update from Python"
+            ) from error
 
 
 def replayed_gradients(

@@ -20,7 +20,7 @@ from lanrocli.agent.noise import restore_generator
 from lanrocli.agent.losses import UpdateTensors, compile_problem, compiled_losses, sac_losses
 from lanrocli.agent.networks import Actor, Critic, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
-from lanrocli.agent.replay import replayed_gradients
+from lanrocli.agent.replay import ReplayedGradients, replayed_gradients
 from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
 from lanrocli.agent.transitions import Batch
 from lanrocli.choices import ActingAttention
@@ -105,8 +105,8 @@ class SACAgent:
         if problem is not None:
             raise ValueError(problem)
         self._losses = compiled_losses() if s.compile else sac_losses
-        replay = s.replay and not s.compile
-        self._replay = replayed_gradients(self, self._learned, self._update_encoders(), self.device) if replay else None
+        self._replay: ReplayedGradients | None = None
+        self._replay_pending = s.replay and not s.compile  # made at the first update, when its C++ is built
 
     def _learning_rates(self) -> list[float]:
         """Per parameter group of the optimiser: critic, actor, then the temperature when it is tuned."""
@@ -181,6 +181,9 @@ class SACAgent:
     def _gradients(self, tokens: torch.Tensor, tensors: UpdateTensors, labelled: bool) -> torch.Tensor:
         """Every learned parameter's gradient of the losses' sum, from one backward pass, in its ``grad``; the
         update's metrics. Replayed (:mod:`lanrocli.agent.replay`), they are the recorded operations of this."""
+        if self._replay_pending:
+            self._replay_pending = False
+            self._replay = replayed_gradients(self, self._learned, self._update_encoders(), self.device)
         if self._replay is not None:
             gradients, metrics = self._replay(tokens, tensors, labelled)
             for parameter, gradient in zip(self._learned, gradients):

@@ -94,7 +94,8 @@ class SACSettings:
     replay: bool = True
     """On CPU, record an update's reading, losses and backward pass once and replay the recorded operations from
     C++ (:mod:`lanrocli.agent.replay`): the same numbers, bit for bit, faster (docs/performance.md). Python in
-    :func:`~lanrocli.agent.losses.sac_losses` runs only while recording: turn it off to change and debug it."""
+    :func:`~lanrocli.agent.losses.sac_losses` runs only while recording, and a branch on a tensor's value cannot
+    be recorded: turn it off to change and debug the losses."""
 
     ARCHITECTURE: ClassVar[tuple[str, ...]] = (
         "critics", "embedding_size", "language_size", "obs_size", "hidden_size", "hidden_layers", "architecture",

@@ -4,12 +4,14 @@ refuses what it could not replay faithfully; a machine that cannot build the rep
 from __future__ import annotations
 
 import copy
+import warnings
 
 import numpy as np
 import pytest
 import torch
 
 from lanrocli.agent import native, replay
+from lanrocli.agent.losses import sac_losses
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.transitions import Batch
 from lanrocli.language import PAD_ID, sample_sentence
@@ -45,10 +47,10 @@ def _batches(rng: np.random.Generator, count: int) -> list[Batch]:
 
 def _trained(settings: dict[str, object], batches: list[Batch], replayed: bool) -> SACAgent:
     agent = _agent(seed=5, **settings, replay=replayed)
-    assert (agent._replay is not None) == replayed, "the replay did not build: the tests need a C++ compiler and ninja"
     agent.update_normalizer(np.random.default_rng(1).normal(size=(50, OBS_DIM)))
     for batch in batches:
         agent.update(batch)
+    assert (agent._replay is not None) == replayed, "the replay did not build: the tests need a C++ compiler and ninja"
     return agent
 
 
@@ -82,6 +84,14 @@ def test_a_recording_replays_on_new_values_and_refuses_a_tensor_that_is_not_an_i
     (want,) = gradient(x, weight)
     (got,) = recording([x, weight])
     assert torch.equal(got, want)
+    def gathered(x: torch.Tensor, columns: torch.Tensor) -> list[torch.Tensor]:
+        ys = [x[:, columns], x * 2]  # an index list holding None; an in-place call returning nothing
+        torch._foreach_mul_(ys, 3.0)
+        return ys
+
+    columns = torch.tensor([2, 0])
+    recording = replay.Recording(gathered, [torch.randn(4, 3), columns], built)
+    assert all(torch.equal(a, b) for a, b in zip(recording([x, columns]), gathered(x, columns)))
     with pytest.raises(ValueError, match="read tensors that are not its inputs"):
         replay.Recording(lambda x: [x @ weight.detach()], [x], built)
 
@@ -94,7 +104,20 @@ def test_a_machine_that_cannot_build_it_is_warned_and_updates_from_python(monkey
 
     monkeypatch.setattr(cpp_extension, "load", no_compiler)
     monkeypatch.setattr(replay, "load", native.load.__wrapped__)  # not the build this process made already
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        agent = _agent(architecture="objects")  # an agent that only acts (lanro eval, play) builds nothing
     with pytest.warns(RuntimeWarning, match="could not build its C\\+\\+ replay of an update's operations \\(.*g\\+\\+: not found"):
-        agent = _agent(architecture="objects")
+        agent.update(_grounding_batch(np.random.default_rng(0), 64))
     assert agent._replay is None
-    agent.update(_grounding_batch(np.random.default_rng(0), 64))
+
+
+def test_losses_that_branch_on_a_value_fail_to_record_and_say_how_to_update_from_python(monkeypatch: pytest.MonkeyPatch) -> None:
+    def branching(*args: object, **kwargs: object) -> tuple[torch.Tensor, torch.Tensor]:
+        loss, metrics = sac_losses(*args, **kwargs)  # type: ignore[arg-type]
+        return (loss if loss > 0 else -loss), metrics
+
+    monkeypatch.setattr(replay, "sac_losses", branching)
+    agent = _agent(architecture="objects")
+    with pytest.raises(RuntimeError, match="could not be recorded for its replay .*agent.replay: false"):
+        agent.update(_grounding_batch(np.random.default_rng(0), 64))
