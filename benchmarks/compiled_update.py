@@ -31,7 +31,7 @@ from functools import partial
 from pathlib import Path
 
 import torch
-from recorded_batches import batch_arguments, compiled_twin, record_batches
+from recorded_batches import batch_arguments, record_batches, twin
 
 from lanrocli.agent.encoder import encode, stacked_gates
 from lanrocli.agent.losses import UpdateTensors, sac_losses
@@ -120,7 +120,8 @@ def main() -> None:
             eager = SACAgent.from_state_dict(eager.state_dict(), args.device)
     if eager.actor.encoder is None or eager.actor.reader is None:
         parser.error("the experiment is written for an object-wise agent with its own actor encoder (reach.yaml's)")
-    losses_compiled = compiled_twin(eager)
+    eager = twin(eager, replay=False)  # the update from Python, which the compiled ones are timed against
+    losses_compiled = twin(eager, compile=True)
     whole = SACAgent.from_state_dict(eager.state_dict(), args.device)
     compiled = torch.compile(whole_losses, dynamic=False, mode=args.mode)
     theirs = list(SACAgent.from_state_dict(eager.state_dict(), args.device).update(batches[0]).values())
@@ -133,7 +134,7 @@ def main() -> None:
     updates = {
         "eager": eager.update, "compile: true": losses_compiled.update, "whole": partial(whole_update, whole, compiled),
         "eager, read in advance": read_in_advance(SACAgent.from_state_dict(eager.state_dict(), args.device), batches),
-        "compile: true, read in advance": read_in_advance(compiled_twin(eager), batches),
+        "compile: true, read in advance": read_in_advance(twin(eager, compile=True), batches),
     }
     for update in updates.values():  # warm-up
         for batch in batches[:5]:

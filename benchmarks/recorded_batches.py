@@ -47,7 +47,3 @@ def twin(agent: SACAgent, **settings: object) -> SACAgent:
     state["settings"] = {**state["settings"], **settings}
     return SACAgent.from_state_dict(state, agent.device)
 
-
-def compiled_twin(agent: SACAgent) -> SACAgent:
-    """The same agent, its update's losses compiled (``SACSettings.compile``)."""
-    return twin(agent, compile=True)
