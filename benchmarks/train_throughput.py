@@ -126,6 +126,7 @@ def main() -> None:
     parser.add_argument("--envs", type=int, default=2)
     parser.add_argument("--learning-starts", type=int, default=500)
     parser.add_argument("--threads", type=int, default=1, help="torch threads (both agents)")
+    parser.add_argument("--interop-threads", type=int, help="torch's inter-op threads: our replayed update's (default: the machine's cores, at most 2)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--batch-size", type=int, help="of both agents (default: 256, or the curriculum's)")
     parser.add_argument("--architecture", choices=["flat", "objects"], help="of our agent (default: flat)")
@@ -140,6 +141,8 @@ def main() -> None:
     if args.curriculum is not None and args.architecture is not None:
         parser.error("--architecture and --curriculum both choose our agent: give one")
     torch.set_num_threads(args.threads)
+    if args.interop_threads is not None:
+        torch.set_num_interop_threads(args.interop_threads)
     if args.curriculum is not None:
         curriculum = load_curriculum(find_curriculum(args.curriculum))
         agent, buffer = curriculum.agent.settings(), curriculum.buffer.settings()

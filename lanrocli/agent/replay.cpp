@@ -5,11 +5,19 @@
 // as a list of dispatcher calls runs the same kernels on the same arguments in the same order, so it gives
 // the same numbers bit for bit, without the interpreter or autograd between them.
 
+#include <ATen/Parallel.h>
 #include <ATen/core/dispatch/Dispatcher.h>
 #include <torch/csrc/jit/python/pybind_utils.h>
 #include <torch/extension.h>
 
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <exception>
+#include <memory>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -32,6 +40,24 @@ struct Call {
   std::vector<int64_t> results;  // where each value the operator returns is kept
   bool unpack = false;           // the operator returns one list of tensors, whose elements go to `results`
   std::vector<int64_t> freed;  // values no later call reads, dropped after this one
+};
+
+// One replay's calls shared by the threads that make them (run_together): the values, what each call still
+// waits for, how many calls still read each value, which calls are taken. Held by every thread through a
+// shared pointer, so a helper that starts late finds it whole, and finds it finished.
+struct Together {
+  explicit Together(size_t calls, size_t slots)
+      : pending(new std::atomic<int32_t>[calls]), readers(new std::atomic<int32_t>[slots]), taken(new std::atomic<bool>[calls]) {}
+  std::vector<c10::IValue> values;
+  std::unique_ptr<std::atomic<int32_t>[]> pending;  // per call: the calls it follows not yet made
+  std::unique_ptr<std::atomic<int32_t>[]> readers;  // per slot: the calls that read it not yet made
+  std::unique_ptr<std::atomic<bool>[]> taken;       // per place in the order: a thread makes that call
+  std::atomic<int64_t> first{0};                    // every place before it is taken
+  std::atomic<int64_t> made{0};
+  std::atomic<bool> closed{false}, failed{false};
+  std::atomic<int32_t> inside{0};  // helpers between their start and their end
+  std::mutex error_mutex;
+  std::exception_ptr error;
 };
 
 // A constant as the dispatcher takes it. A Python number where the schema asks for a tensor becomes what
@@ -94,61 +120,212 @@ class Program {
     calls_.push_back(std::move(call));
   }
 
+  // From now on `threads` threads make the calls together, each taking the first call in `order` whose
+  // calls in `after` are made: `order` must follow `after`, and `after` every value a call reads (which is
+  // checked) and every change in place. Every call computes what it did alone; only who makes it changes.
+  void schedule(int64_t threads, std::vector<int64_t> order, const std::vector<std::vector<int64_t>>& after) {
+    const auto calls = static_cast<int64_t>(calls_.size());
+    TORCH_CHECK(threads >= 1 && order.size() == calls_.size() && after.size() == calls_.size(),
+                "a schedule takes a thread count, and an order and the calls to follow for each call");
+    std::vector<int64_t> place(calls, -1);
+    for (int64_t k = 0; k < calls; ++k) {
+      TORCH_CHECK(order[k] >= 0 && order[k] < calls && place[order[k]] < 0, "the order is not of the program's calls");
+      place[order[k]] = k;
+    }
+    std::vector<int64_t> made_by(slots_, -1);
+    for (int64_t i = 0; i < calls; ++i)
+      for (const int64_t slot : calls_[i].results)
+        if (slot >= 0) made_by[slot] = i;
+    followed_.assign(calls, 0);
+    next_.assign(calls, {});
+    reads_.assign(calls, {});
+    readers_.assign(slots_, 0);
+    for (int64_t i = 0; i < calls; ++i) {
+      std::vector<int64_t> before(after[i]);
+      std::sort(before.begin(), before.end());
+      before.erase(std::unique(before.begin(), before.end()), before.end());
+      for (const int64_t d : before) {
+        TORCH_CHECK(d >= 0 && d < calls && place[d] < place[i], "call ", i, " follows call ", d, ", which the order puts after it");
+        next_[d].push_back(i);
+      }
+      followed_[i] = static_cast<int32_t>(before.size());
+      std::vector<int64_t>& reads = reads_[i];
+      for (const Argument& argument : calls_[i].arguments) {
+        if (argument.kind == Argument::Kind::Value) reads.push_back(argument.slot);
+        for (const int64_t slot : argument.slots)
+          if (slot >= 0) reads.push_back(slot);
+      }
+      std::sort(reads.begin(), reads.end());
+      reads.erase(std::unique(reads.begin(), reads.end()), reads.end());
+      for (const int64_t slot : reads) {
+        TORCH_CHECK(made_by[slot] < 0 || std::binary_search(before.begin(), before.end(), made_by[slot]), "call ", i,
+                    " reads what call ", made_by[slot], " makes without following it");
+        ++readers_[slot];
+      }
+    }
+    for (const auto* kept : {&inputs_, &outputs_})
+      for (const int64_t slot : *kept) readers_[slot] = -1;  // never dropped
+    order_ = std::move(order);
+    threads_ = threads;
+  }
+
   std::vector<at::Tensor> run(const std::vector<at::Tensor>& inputs) const {
-    TORCH_CHECK(inputs.size() == inputs_.size(), "the program takes ", inputs_.size(), " inputs, not ", inputs.size());
-    // The recorded operations are those autograd ran: replayed below it, they record no graph of their own.
-    const at::AutoDispatchBelowADInplaceOrView below_autograd;
-    std::vector<c10::IValue> values(slots_);
-    for (size_t i = 0; i < inputs.size(); ++i) values[inputs_[i]] = inputs[i];
+    const BelowAutograd below_autograd;
+    if (threads_ > 1) return run_together(inputs);
+    std::vector<c10::IValue> values = start(inputs);
     torch::jit::Stack stack;
     for (const Call& call : calls_) {
-      stack.clear();
-      for (const Argument& argument : call.arguments) {
-        switch (argument.kind) {
-          case Argument::Kind::Value:
-            stack.push_back(values[argument.slot]);
-            break;
-          case Argument::Kind::Values:
-            if (argument.optional) {
-              c10::List<std::optional<at::Tensor>> list;
-              for (const int64_t slot : argument.slots)
-                list.push_back(slot < 0 ? std::nullopt : std::optional<at::Tensor>(values[slot].toTensor()));
-              stack.emplace_back(std::move(list));
-            } else {
-              c10::List<at::Tensor> list;
-              list.reserve(argument.slots.size());
-              for (const int64_t slot : argument.slots) list.push_back(values[slot].toTensor());
-              stack.emplace_back(std::move(list));
-            }
-            break;
-          case Argument::Kind::Constant:
-            stack.push_back(argument.constant);
-            break;
-        }
-      }
-      call.op.callBoxed(stack);
-      TORCH_CHECK(call.unpack || stack.size() >= call.results.size(), call.op.schema().name(), " returned ",
-                  stack.size(), " values, not ", call.results.size());
-      if (call.unpack) {
-        const c10::List<at::Tensor> list = stack[0].toTensorList();
-        for (size_t k = 0; k < call.results.size(); ++k)
-          if (call.results[k] >= 0) values[call.results[k]] = list.get(k);
-      } else {
-        for (size_t k = 0; k < call.results.size(); ++k)
-          if (call.results[k] >= 0) values[call.results[k]] = std::move(stack[k]);
-      }
+      make(call, values, stack);
       for (const int64_t slot : call.freed) values[slot] = c10::IValue();
     }
+    return finish(values);
+  }
+
+  // The calls one after another, and the nanoseconds each took: what an order is planned on.
+  std::pair<std::vector<at::Tensor>, std::vector<int64_t>> timed(const std::vector<at::Tensor>& inputs) const {
+    const BelowAutograd below_autograd;
+    std::vector<c10::IValue> values = start(inputs);
+    std::vector<int64_t> times;
+    times.reserve(calls_.size());
+    torch::jit::Stack stack;
+    for (const Call& call : calls_) {
+      const auto begin = std::chrono::steady_clock::now();
+      make(call, values, stack);
+      times.push_back(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - begin).count());
+    }
+    return {finish(values), times};
+  }
+
+ private:
+  // Each thread that makes calls holds this while it does: the recorded operations are those autograd ran,
+  // and replayed below it they record no graph of their own.
+  using BelowAutograd = at::AutoDispatchBelowADInplaceOrView;
+
+  // How far past the first call not taken a thread looks for one it can make.
+  static constexpr int64_t kLookAhead = 64;
+
+  std::vector<c10::IValue> start(const std::vector<at::Tensor>& inputs) const {
+    TORCH_CHECK(inputs.size() == inputs_.size(), "the program takes ", inputs_.size(), " inputs, not ", inputs.size());
+    std::vector<c10::IValue> values(slots_);
+    for (size_t i = 0; i < inputs.size(); ++i) values[inputs_[i]] = inputs[i];
+    return values;
+  }
+
+  std::vector<at::Tensor> finish(const std::vector<c10::IValue>& values) const {
     std::vector<at::Tensor> outputs;
     outputs.reserve(outputs_.size());
     for (const int64_t slot : outputs_) outputs.push_back(values[slot].toTensor());
     return outputs;
   }
 
- private:
+  // One call on the values: its arguments pushed, the operator called, its results kept.
+  static void make(const Call& call, std::vector<c10::IValue>& values, torch::jit::Stack& stack) {
+    stack.clear();
+    for (const Argument& argument : call.arguments) {
+      switch (argument.kind) {
+        case Argument::Kind::Value:
+          stack.push_back(values[argument.slot]);
+          break;
+        case Argument::Kind::Values:
+          if (argument.optional) {
+            c10::List<std::optional<at::Tensor>> list;
+            for (const int64_t slot : argument.slots)
+              list.push_back(slot < 0 ? std::nullopt : std::optional<at::Tensor>(values[slot].toTensor()));
+            stack.emplace_back(std::move(list));
+          } else {
+            c10::List<at::Tensor> list;
+            list.reserve(argument.slots.size());
+            for (const int64_t slot : argument.slots) list.push_back(values[slot].toTensor());
+            stack.emplace_back(std::move(list));
+          }
+          break;
+        case Argument::Kind::Constant:
+          stack.push_back(argument.constant);
+          break;
+      }
+    }
+    call.op.callBoxed(stack);
+    TORCH_CHECK(call.unpack || stack.size() >= call.results.size(), call.op.schema().name(), " returned ", stack.size(),
+                " values, not ", call.results.size());
+    if (call.unpack) {
+      const c10::List<at::Tensor> list = stack[0].toTensorList();
+      for (size_t k = 0; k < call.results.size(); ++k)
+        if (call.results[k] >= 0) values[call.results[k]] = list.get(k);
+    } else {
+      for (size_t k = 0; k < call.results.size(); ++k)
+        if (call.results[k] >= 0) values[call.results[k]] = std::move(stack[k]);
+    }
+  }
+
+  // This thread and threads_ - 1 helpers from torch's inter-op pool take calls as they become ready; this one
+  // makes whatever is left when helpers start late or not at all, so a busy machine costs no more than one
+  // thread. A value is read only after its call counted itself made (release, acquire), and dropped by the
+  // last call that reads it; an error in any call stops them all and is raised here.
+  std::vector<at::Tensor> run_together(const std::vector<at::Tensor>& inputs) const {
+    const auto shared = std::make_shared<Together>(calls_.size(), static_cast<size_t>(slots_));
+    Together& together = *shared;
+    together.values = start(inputs);
+    for (size_t i = 0; i < calls_.size(); ++i) {
+      together.pending[i].store(followed_[i], std::memory_order_relaxed);
+      together.taken[i].store(false, std::memory_order_relaxed);
+    }
+    for (int64_t slot = 0; slot < slots_; ++slot) together.readers[slot].store(readers_[slot], std::memory_order_relaxed);
+    for (int64_t k = 1; k < threads_; ++k) {
+      at::launch([shared, this] {
+        shared->inside.fetch_add(1);
+        if (!shared->closed.load()) take_calls(*shared);
+        shared->inside.fetch_sub(1);
+      });
+    }
+    take_calls(together);
+    together.closed.store(true);
+    while (together.inside.load() > 0) std::this_thread::yield();  // none reads this program after this
+    if (together.error) std::rethrow_exception(together.error);
+    return finish(together.values);
+  }
+
+  void take_calls(Together& together) const {
+    const BelowAutograd below_autograd;
+    const auto calls = static_cast<int64_t>(calls_.size());
+    torch::jit::Stack stack;
+    try {
+      for (int idle = 0; together.made.load(std::memory_order_acquire) < calls && !together.failed.load(std::memory_order_relaxed);) {
+        int64_t first = together.first.load(std::memory_order_relaxed);
+        while (first < calls && together.taken[first].load(std::memory_order_relaxed)) ++first;
+        if (first > together.first.load(std::memory_order_relaxed)) together.first.store(first, std::memory_order_relaxed);
+        int64_t call = -1;
+        for (int64_t k = first; k < std::min(calls, first + kLookAhead) && call < 0; ++k) {
+          if (together.taken[k].load(std::memory_order_relaxed) || together.pending[order_[k]].load(std::memory_order_acquire) > 0) continue;
+          if (!together.taken[k].exchange(true, std::memory_order_acq_rel)) call = order_[k];
+        }
+        if (call < 0) {
+          if (++idle > 64) std::this_thread::yield();
+          continue;
+        }
+        idle = 0;
+        make(calls_[call], together.values, stack);
+        stack.clear();
+        for (const int64_t slot : reads_[call])
+          if (together.readers[slot].fetch_sub(1, std::memory_order_acq_rel) == 1) together.values[slot] = c10::IValue();
+        for (const int64_t next : next_[call]) together.pending[next].fetch_sub(1, std::memory_order_release);
+        together.made.fetch_add(1, std::memory_order_release);
+      }
+    } catch (...) {
+      const std::lock_guard<std::mutex> lock(together.error_mutex);
+      if (!together.failed.exchange(true)) together.error = std::current_exception();
+    }
+  }
+
   int64_t slots_;
   std::vector<int64_t> inputs_, outputs_;
   std::vector<Call> calls_;
+  // Set by schedule: how many threads make the calls, in which order they are taken, per call how many calls
+  // it follows and which follow it, the values it reads; per value how many calls read it (-1: kept).
+  int64_t threads_ = 1;
+  std::vector<int64_t> order_;
+  std::vector<int32_t> followed_;
+  std::vector<std::vector<int64_t>> next_, reads_;
+  std::vector<int32_t> readers_;
 };
 
 }  // namespace
@@ -157,5 +334,7 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   py::class_<Program>(m, "Program")
       .def(py::init<int64_t, std::vector<int64_t>, std::vector<int64_t>>())
       .def("add", &Program::add)
-      .def("run", &Program::run, py::call_guard<py::gil_scoped_release>());
+      .def("schedule", &Program::schedule)
+      .def("run", &Program::run, py::call_guard<py::gil_scoped_release>())
+      .def("timed", &Program::timed, py::call_guard<py::gil_scoped_release>());
 }

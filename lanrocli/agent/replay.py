@@ -22,6 +22,7 @@ from __future__ import annotations
 import copy
 import operator
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import torch
@@ -33,24 +34,34 @@ from lanrocli.agent.losses import Learner, UpdateTensors, sac_losses
 from lanrocli.agent.native import REPLAY, load
 from lanrocli.language import PAD_ID
 
+MAX_LANES = 2  # an update's longest chain of calls is about two fifths of its work: a third lane would wait
+TIMED_RUNS = 4
+
 
 class Recording:
     """A function of tensors (one argument each), returning a list of tensors, as the operations one call of
     it ran."""
 
-    def __init__(self, function: Callable[..., Sequence[torch.Tensor]], inputs: Sequence[torch.Tensor], native: Any) -> None:
+    def __init__(
+        self, function: Callable[..., Sequence[torch.Tensor]], inputs: Sequence[torch.Tensor], native: Any, lanes: int = 1
+    ) -> None:
         graph = make_fx(function)(*inputs).graph
         graph.eliminate_dead_code()
         constants = [node.target for node in graph.nodes if node.op == "get_attr"]
         if constants:
             raise ValueError(f"the recorded function read tensors that are not its inputs ({', '.join(map(str, constants))}); pass them in")
-        self._program = _program(graph, native)
+        self._program, calls = _program(graph, native)
+        if lanes > 1:
+            # Ordered on what each call took here, the fastest of a few runs (the first warms the kernels).
+            times = [self._program.timed(list(inputs))[1] for _ in range(TIMED_RUNS)]
+            calls.costs = [min(took) / 1000 for took in zip(*times)]
+            self._program.schedule(lanes, *calls.order())
 
     def __call__(self, inputs: Sequence[torch.Tensor]) -> list[torch.Tensor]:
         return self._program.run(list(inputs))
 
 
-def _program(graph: Graph, native: Any) -> Any:
+def _program(graph: Graph, native: Any) -> tuple[Any, _Calls]:
     """``graph``'s calls as the native ``Program`` replays them: every value a numbered slot, each call the
     operator, its arguments (slots, lists of slots, constants) in its schema's order, the slots its results go
     to, and the slots no later call reads, which it frees."""
@@ -110,7 +121,71 @@ def _program(graph: Graph, native: Any) -> Any:
     program = native.Program(len(slots), inputs, outputs)
     for index, (schema, arguments, results, unpack) in enumerate(calls):
         program.add(schema.name, schema.overload_name, arguments, results, unpack, freed.get(index, []))
-    return program
+    reads = [[read for kind, value in arguments for read in ([value] if kind == "value" else value if kind == "values" else []) if read >= 0]
+             for _, arguments, _, _ in calls]
+    aliased = [_aliased(schema, arguments) for schema, arguments, _, _ in calls]
+    return program, _Calls(reads, [results for *_, results, _ in calls], *map(list, zip(*aliased)), {*inputs, *outputs})
+
+
+def _aliased(schema: Any, arguments: list[tuple[str, Any]]) -> tuple[list[int], list[int]]:
+    """The slots of a call's arguments that its results may share memory with (a view's base), and those it
+    changes in place."""
+    shared, written = [], []
+    for declared, (kind, value) in zip(schema.arguments, arguments):
+        if declared.alias_info is not None and kind == "value":
+            shared.append(value)
+            if declared.alias_info.is_write:
+                written.append(value)
+    return shared, written
+
+
+@dataclass
+class _Calls:
+    """What a schedule of a program's calls (in recorded order) is planned on."""
+
+    reads: list[list[int]]  # the slots each call reads
+    results: list[list[int]]  # the slots it writes (-1: a result nothing reads)
+    shared: list[list[int]]  # the slots of its arguments whose memory its results may share (a view's base)
+    written: list[list[int]]  # the slots of its arguments it changes in place
+    kept: set[int]  # the inputs and outputs, never dropped
+    costs: list[float] = field(default_factory=list)  # microseconds each took, one after another
+
+    def after(self) -> list[set[int]]:
+        """The calls each call must follow: those that made what it reads, and, where a call changes a tensor
+        in place, every call that reads that tensor's memory (it, a view of it, its base) before it goes before
+        it and every one after it goes after it."""
+        made_by = {slot: index for index, results in enumerate(self.results) for slot in results if slot >= 0}
+        memory = {slot: {slot} for results in self.results for slot in results if slot >= 0}
+        for reads in self.reads:
+            for slot in reads:
+                memory.setdefault(slot, {slot})
+        for results, shared in zip(self.results, self.shared):
+            joined = set().union(*(memory[slot] for slot in [*shared, *results] if slot >= 0))
+            for slot in joined:
+                memory[slot] = joined
+        after = [{made_by[slot] for slot in reads if slot in made_by} for reads in self.reads]
+        readers: dict[int, list[int]] = {}
+        for index, reads in enumerate(self.reads):
+            for slot in reads:
+                readers.setdefault(slot, []).append(index)
+        for index, written in enumerate(self.written):
+            for touching in {reader for slot in written for other in memory[slot] for reader in readers.get(other, [])}:
+                if touching < index:
+                    after[index].add(touching)
+                elif touching > index:
+                    after[touching].add(index)
+        return after
+
+    def order(self) -> tuple[list[int], list[list[int]]]:
+        """The order in which threads take the calls, longest remaining path first (the cost of the costliest
+        chain of calls from it to the end), which follows every dependency; and what each call follows."""
+        after = self.after()
+        costs = [max(cost, 1e-3) for cost in self.costs]  # a path strictly longer than any that follows it
+        remaining = list(costs)
+        for index in reversed(range(len(costs))):
+            for before in after[index]:
+                remaining[before] = max(remaining[before], costs[before] + remaining[index])
+        return sorted(range(len(costs)), key=lambda index: (-remaining[index], index)), [sorted(a) for a in after]
 
 
 class ReplayedGradients:
@@ -118,8 +193,10 @@ class ReplayedGradients:
     after: the encoders' reading of the batch's sentences (:func:`~lanrocli.agent.encoder.encode`),
     :func:`~lanrocli.agent.losses.sac_losses`, and the gradients of the losses' sum for the ``learned`` tensors."""
 
-    def __init__(self, native: Any, agent: Learner, learned: Sequence[torch.Tensor], encoders: Sequence[LanguageEncoder]) -> None:
-        self._native = native
+    def __init__(
+        self, native: Any, agent: Learner, learned: Sequence[torch.Tensor], encoders: Sequence[LanguageEncoder], lanes: int = 1
+    ) -> None:
+        self._native, self.lanes = native, lanes
         self._agent, self._learned, self._encoders = agent, list(learned), list(encoders)
         # Everything the update reads of the agent: its networks (encoders included) and the temperature, taken
         # once: the optimiser and load_state_dict change them in place, as they must for a replay to see it.
@@ -130,7 +207,7 @@ class ReplayedGradients:
         """A copy of the agent gets a replay of its own, which records anew: a recording holds the tensors of
         the agent it was made for."""
         copied = ReplayedGradients.__new__(ReplayedGradients)
-        copied._native, copied._recordings = self._native, {}
+        copied._native, copied.lanes, copied._recordings = self._native, self.lanes, {}
         # Through the memo, to the copy's own tensors (which may not be whole yet: no attribute is read here).
         copied._agent, copied._learned, copied._encoders, copied._state = (
             copy.deepcopy(x, memo) for x in (self._agent, self._learned, self._encoders, self._state)
@@ -168,7 +245,7 @@ class ReplayedGradients:
             return [*(grad for grad in grads if grad is not None), metrics]
 
         try:
-            return Recording(gradients, [*self._state, tokens, *tensors], self._native), has_gradient
+            return Recording(gradients, [*self._state, tokens, *tensors], self._native, self.lanes), has_gradient
         except RuntimeError as error:  # a branch on a tensor's value, most likely: Python that needs the values
             raise RuntimeError(
                 f"the update could not be recorded for its replay ({error}); sac_losses and the networks must be "
@@ -176,13 +253,19 @@ class ReplayedGradients:
             ) from error
 
 
+def update_threads() -> int:
+    """How many threads a replayed update runs on by default: torch's inter-op threads
+    (``torch.set_num_interop_threads``; by default the machine's cores), at most ``MAX_LANES``."""
+    return max(1, min(MAX_LANES, torch.get_num_interop_threads()))
+
+
 def replayed_gradients(
-    agent: Learner, learned: Sequence[torch.Tensor], encoders: Sequence[LanguageEncoder], device: torch.device
+    agent: Learner, learned: Sequence[torch.Tensor], encoders: Sequence[LanguageEncoder], device: torch.device, lanes: int = 1
 ) -> ReplayedGradients | None:
-    """The replay of ``agent``'s update on ``device``, or None where there is none: on CUDA (recorded and checked
-    on CPU only), or on a machine that cannot build ``replay.cpp`` or the C++ reading (whose one call a
-    recording holds where the Python reading's steps depend on the batch), each warned once."""
+    """The replay of ``agent``'s update on ``device``, in ``lanes`` threads, or None where there is none: on CUDA
+    (recorded and checked on CPU only), or on a machine that cannot build ``replay.cpp`` or the C++ reading
+    (whose one call a recording holds where the Python reading's steps depend on the batch), each warned once."""
     if native_reading(device) is None:
         return None
     native = load(REPLAY)
-    return None if native is None else ReplayedGradients(native, agent, learned, encoders)
+    return None if native is None else ReplayedGradients(native, agent, learned, encoders, lanes)

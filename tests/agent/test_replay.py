@@ -9,6 +9,7 @@ import warnings
 import numpy as np
 import pytest
 import torch
+from torch.fx.experimental.proxy_tensor import make_fx
 
 from lanrocli.agent import native, replay
 from lanrocli.agent.losses import sac_losses
@@ -45,8 +46,9 @@ def _batches(rng: np.random.Generator, count: int) -> list[Batch]:
     return batches
 
 
-def _trained(settings: dict[str, object], batches: list[Batch], replayed: bool) -> SACAgent:
+def _trained(settings: dict[str, object], batches: list[Batch], replayed: bool, threads: int = 1) -> SACAgent:
     agent = _agent(seed=5, **settings, replay=replayed)
+    agent.update_threads = threads
     agent.update_normalizer(np.random.default_rng(1).normal(size=(50, OBS_DIM)))
     for batch in batches:
         agent.update(batch)
@@ -54,10 +56,11 @@ def _trained(settings: dict[str, object], batches: list[Batch], replayed: bool) 
     return agent
 
 
+@pytest.mark.parametrize("threads", [1, 2])
 @pytest.mark.parametrize("settings", SHAPES, ids=lambda settings: ",".join(f"{k}={v}" for k, v in settings.items()))
-def test_replayed_updates_leave_every_weight_and_metric_as_python_does(settings: dict[str, object]) -> None:
+def test_replayed_updates_leave_every_weight_and_metric_as_python_does(settings: dict[str, object], threads: int) -> None:
     batches = _batches(np.random.default_rng(0), 12)
-    replayed, python = (_trained(settings, batches, flag) for flag in (True, False))
+    replayed, python = _trained(settings, batches, True, threads), _trained(settings, batches, False)
     assert len(replayed._replay._recordings) == 3  # one per kind of batch, reused after
     want, got = python.state_dict(), replayed.state_dict()
     for network in ("actor", "critic", "target_critic"):
@@ -94,6 +97,52 @@ def test_a_recording_replays_on_new_values_and_refuses_a_tensor_that_is_not_an_i
     assert all(torch.equal(a, b) for a, b in zip(recording([x, columns]), gathered(x, columns)))
     with pytest.raises(ValueError, match="read tensors that are not its inputs"):
         replay.Recording(lambda x: [x @ weight.detach()], [x], built)
+
+
+def test_calls_made_by_two_threads_follow_what_they_read_and_every_change_in_place() -> None:
+    built = native.load(native.REPLAY)
+
+    def changed(x: torch.Tensor) -> list[torch.Tensor]:
+        y = x * 1.0
+        row = y[0]  # a view: it sees the change below
+        before = row + 1.0
+        y.mul_(2.0)
+        return [before, row + 1.0, y.sum(0)]
+
+    x = torch.randn(5, 3)
+    graph = make_fx(changed)(x).graph
+    program, calls = replay._program(graph, built)
+    after = calls.after()
+    (changing,) = [index for index, written in enumerate(calls.written) if written]
+    (view,) = [index for index, shared in enumerate(calls.shared) if shared and index != changing]
+    readers = [index for index, reads in enumerate(calls.reads) if set(reads) & set(calls.results[view])]
+    assert min(readers) < changing < max(readers)
+    assert all(index in after[changing] for index in readers if index < changing)  # read before, made before
+    assert all(changing in after[index] for index in readers if index > changing)  # read after, made after
+    recording = replay.Recording(changed, [x], built, lanes=2)
+    for _ in range(200):
+        y = torch.randn(5, 3)
+        assert all(torch.equal(a, b) for a, b in zip(recording([y]), changed(y)))
+    calls.costs = [1.0] * len(calls.reads)
+    order, after_lists = calls.order()
+    with pytest.raises(RuntimeError, match="which the order puts after it"):
+        program.schedule(2, order[::-1], after_lists)
+
+
+def test_an_error_in_a_call_made_by_a_helper_thread_is_raised_and_the_program_runs_after() -> None:
+    built = native.load(native.REPLAY)
+    weight = torch.randn(3, 3, requires_grad=True)
+
+    def gradients(x: torch.Tensor, w: torch.Tensor) -> list[torch.Tensor]:
+        a, b = (x @ w).tanh(), (x @ w.t()).sigmoid()
+        return list(torch.autograd.grad((a * b).sum(), w))
+
+    x = torch.randn(4, 3)
+    recording = replay.Recording(gradients, [x, weight], built, lanes=2)
+    for _ in range(20):
+        with pytest.raises(RuntimeError, match="cannot be multiplied|size"):
+            recording([torch.randn(4, 5), weight])
+        assert torch.equal(recording([x, weight])[0], gradients(x, weight)[0])
 
 
 def test_a_machine_that_cannot_build_it_is_warned_and_updates_from_python(monkeypatch: pytest.MonkeyPatch) -> None:
