@@ -1,7 +1,8 @@
 """What replaying an update's recorded operations from C++ (``SACSettings.replay``, ``lanrocli/agent/replay.py``)
-saves against running the update from Python, on the shipped curricula's agent and batches recorded in one of
-reach.yaml's stages: two copies of one agent update on the same batches, alternating rounds, and the run
-checks that their weights, the optimiser's moments and the metrics stay identical.
+saves against running the update from Python, on one thread and on two (``SACAgent.update_threads``), on the
+shipped curricula's agent and batches recorded in one of reach.yaml's stages: three copies of one agent update
+on the same batches, alternating rounds, and the run checks that their weights, the optimiser's moments and
+the metrics stay identical.
 
     python benchmarks/replayed_update.py --stage 3 --updates 200 --rounds 4
 """
@@ -36,9 +37,10 @@ def main() -> None:
     torch.set_num_threads(1)
 
     agent, batches = record_batches(args, parser)
-    agents = {"python": twin(agent, replay=False), "replayed": twin(agent, replay=True)}
+    agents = {"python": twin(agent, replay=False), "one thread": twin(agent, replay=True), "two threads": twin(agent, replay=True)}
+    agents["one thread"].update_threads, agents["two threads"].update_threads = 1, 2
     metrics = {name: [a.update(batch) for batch in batches[:5]] for name, a in agents.items()}  # warm-up, recording
-    if agents["replayed"]._replay is None:
+    if agents["one thread"]._replay is None:
         parser.error("the replay could not be built here (see the warning)")
     times: dict[str, list[float]] = {name: [] for name in agents}
     for round_ in range(1, args.rounds + 1):
@@ -46,13 +48,13 @@ def main() -> None:
             start = time.perf_counter()
             metrics[name] += [a.update(batch) for batch in batches]
             times[name].append((time.perf_counter() - start) / len(batches) * 1000)
-        print(f"round {round_}: " + ", ".join(f"{name} {ms[-1]:.2f} ms" for name, ms in times.items())
-              + f" per update; {times['python'][-1] / times['replayed'][-1]:.2f}x", flush=True)
+        print(f"round {round_}: " + ", ".join(f"{name} {ms[-1]:.2f} ms" for name, ms in times.items()) + " per update",
+              flush=True)
     medians = {name: statistics.median(ms) for name, ms in times.items()}
-    same = identical(agents["python"], agents["replayed"]) and metrics["python"] == metrics["replayed"]
-    print(f"median: python {medians['python']:.2f} ms, replayed {medians['replayed']:.2f} ms per update, "
-          f"{medians['python'] / medians['replayed']:.2f}x; after {len(metrics['python'])} updates each the weights, "
-          f"moments and metrics are {'identical' if same else 'NOT identical'}")
+    same = all(identical(agents["python"], a) and metrics["python"] == metrics[name] for name, a in agents.items())
+    print("median per update: " + ", ".join(f"{name} {ms:.2f} ms ({medians['python'] / ms:.2f}x)" for name, ms in medians.items())
+          + f"; two threads against one {medians['one thread'] / medians['two threads']:.2f}x; after "
+          f"{len(metrics['python'])} updates each the weights, moments and metrics are {'identical' if same else 'NOT identical'}")
 
 
 if __name__ == "__main__":

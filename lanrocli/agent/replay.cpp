@@ -2,8 +2,9 @@
 //
 // An update at batch 64 is a few hundred small operations, and on CPU each costs more to reach from Python,
 // through autograd, than to compute. Replaying the operations that one update ran, forward and backward,
-// as a list of dispatcher calls runs the same kernels on the same arguments in the same order, so it gives
-// the same numbers bit for bit, without the interpreter or autograd between them.
+// as a list of dispatcher calls runs the same kernels on the same arguments, so it gives the same numbers bit
+// for bit, without the interpreter or autograd between them. Calls that do not depend on each other can be
+// made by two threads at once: each still computes what it computed alone.
 
 #include <ATen/Parallel.h>
 #include <ATen/core/dispatch/Dispatcher.h>
@@ -39,25 +40,147 @@ struct Call {
   std::vector<Argument> arguments;
   std::vector<int64_t> results;  // where each value the operator returns is kept
   bool unpack = false;           // the operator returns one list of tensors, whose elements go to `results`
-  std::vector<int64_t> freed;  // values no later call reads, dropped after this one
+  std::vector<int64_t> freed;  // values no later call reads, dropped after this one (calls made in order)
 };
 
-// One replay's calls shared by the threads that make them (run_together): the values, what each call still
-// waits for, how many calls still read each value, which calls are taken. Held by every thread through a
-// shared pointer, so a helper that starts late finds it whole, and finds it finished.
-struct Together {
-  explicit Together(size_t calls, size_t slots)
-      : pending(new std::atomic<int32_t>[calls]), readers(new std::atomic<int32_t>[slots]), taken(new std::atomic<bool>[calls]) {}
-  std::vector<c10::IValue> values;
-  std::unique_ptr<std::atomic<int32_t>[]> pending;  // per call: the calls it follows not yet made
-  std::unique_ptr<std::atomic<int32_t>[]> readers;  // per slot: the calls that read it not yet made
-  std::unique_ptr<std::atomic<bool>[]> taken;       // per place in the order: a thread makes that call
-  std::atomic<int64_t> first{0};                    // every place before it is taken
-  std::atomic<int64_t> made{0};
-  std::atomic<bool> closed{false}, failed{false};
-  std::atomic<int32_t> inside{0};  // helpers between their start and their end
-  std::mutex error_mutex;
-  std::exception_ptr error;
+// The calls, and how threads take them (Program::schedule): in which order, per call how many calls it
+// follows and which follow it and the values it reads, per value how many calls read it (-1: never dropped).
+struct Plan {
+  std::vector<Call> calls;
+  int64_t threads = 1;
+  std::vector<int64_t> order;
+  std::vector<int32_t> followed;
+  std::vector<std::vector<int64_t>> next, reads;
+  std::vector<int32_t> readers;
+};
+
+// The recorded operations are those autograd ran: replayed below it, they record no graph of their own. Each
+// thread that makes calls holds this while it does.
+using BelowAutograd = at::AutoDispatchBelowADInplaceOrView;
+
+// One call on the values: its arguments pushed, the operator called, its results kept.
+void make(const Call& call, std::vector<c10::IValue>& values, torch::jit::Stack& stack) {
+  stack.clear();
+  for (const Argument& argument : call.arguments) {
+    switch (argument.kind) {
+      case Argument::Kind::Value:
+        stack.push_back(values[argument.slot]);
+        break;
+      case Argument::Kind::Values:
+        if (argument.optional) {
+          c10::List<std::optional<at::Tensor>> list;
+          for (const int64_t slot : argument.slots)
+            list.push_back(slot < 0 ? std::nullopt : std::optional<at::Tensor>(values[slot].toTensor()));
+          stack.emplace_back(std::move(list));
+        } else {
+          c10::List<at::Tensor> list;
+          list.reserve(argument.slots.size());
+          for (const int64_t slot : argument.slots) list.push_back(values[slot].toTensor());
+          stack.emplace_back(std::move(list));
+        }
+        break;
+      case Argument::Kind::Constant:
+        stack.push_back(argument.constant);
+        break;
+    }
+  }
+  call.op.callBoxed(stack);
+  TORCH_CHECK(call.unpack || stack.size() >= call.results.size(), call.op.schema().name(), " returned ", stack.size(),
+              " values, not ", call.results.size());
+  if (call.unpack) {
+    const c10::List<at::Tensor> list = stack[0].toTensorList();
+    for (size_t k = 0; k < call.results.size(); ++k)
+      if (call.results[k] >= 0) values[call.results[k]] = list.get(k);
+  } else {
+    for (size_t k = 0; k < call.results.size(); ++k)
+      if (call.results[k] >= 0) values[call.results[k]] = std::move(stack[k]);
+  }
+  stack.clear();
+}
+
+// One replay made by several threads: the plan, the values, what each call still waits for, how many calls
+// still read each value, which calls are taken. Every thread holds it through a shared pointer, so a helper
+// that starts after the replay ended finds it whole, and finished.
+class Together {
+ public:
+  Together(std::shared_ptr<const Plan> plan, std::vector<c10::IValue> values)
+      : plan_(std::move(plan)),
+        values_(std::move(values)),
+        pending_(new std::atomic<int32_t>[plan_->calls.size()]),
+        readers_(new std::atomic<int32_t>[values_.size()]),
+        taken_(new std::atomic<bool>[plan_->calls.size()]) {
+    for (size_t i = 0; i < plan_->calls.size(); ++i) {
+      pending_[i].store(plan_->followed[i], std::memory_order_relaxed);
+      taken_[i].store(false, std::memory_order_relaxed);
+    }
+    for (size_t slot = 0; slot < values_.size(); ++slot) readers_[slot].store(plan_->readers[slot], std::memory_order_relaxed);
+  }
+
+  // Takes the first call in the plan's order whose calls to follow are made, makes it, and again, until all
+  // are made. A value is read only after the call that makes it counted itself made (release, acquire), and
+  // dropped by the last call that reads it; an error stops every thread, and the replay's thread raises it.
+  void take_calls() {
+    const BelowAutograd below_autograd;
+    const auto calls = static_cast<int64_t>(plan_->calls.size());
+    torch::jit::Stack stack;
+    try {
+      // `seen` is read once a round: a call made after it ends the wait below, one made before it is seen.
+      for (int64_t seen = made_.load(std::memory_order_acquire); seen < calls && !failed_.load(std::memory_order_relaxed);
+           seen = made_.load(std::memory_order_acquire)) {
+        int64_t first = first_.load(std::memory_order_relaxed);
+        while (first < calls && taken_[first].load(std::memory_order_relaxed)) ++first;
+        if (first > first_.load(std::memory_order_relaxed)) first_.store(first, std::memory_order_relaxed);
+        int64_t call = -1;
+        for (int64_t k = first; k < std::min(calls, first + kLookAhead) && call < 0; ++k) {
+          if (taken_[k].load(std::memory_order_relaxed) || pending_[plan_->order[k]].load(std::memory_order_acquire) > 0) continue;
+          if (!taken_[k].exchange(true, std::memory_order_acq_rel)) call = plan_->order[k];
+        }
+        if (call < 0) {
+          wait_after(seen);
+          continue;
+        }
+        make(plan_->calls[call], values_, stack);
+        for (const int64_t slot : plan_->reads[call])
+          if (readers_[slot].fetch_sub(1, std::memory_order_acq_rel) == 1) values_[slot] = c10::IValue();
+        for (const int64_t next : plan_->next[call]) pending_[next].fetch_sub(1, std::memory_order_release);
+        count_made();
+      }
+    } catch (...) {
+      const std::lock_guard<std::mutex> lock(error_mutex_);
+      if (!failed_.exchange(true)) error_ = std::current_exception();
+    }
+  }
+
+  // The values once every call is made (the replay's thread, after its take_calls), or the error.
+  const std::vector<c10::IValue>& values() {
+    while (made_.load() < static_cast<int64_t>(plan_->calls.size()) && !failed_.load()) wait_after(made_.load());
+    const std::lock_guard<std::mutex> lock(error_mutex_);
+    if (error_) std::rethrow_exception(error_);
+    return values_;
+  }
+
+ private:
+  // How far past the first call not taken a thread looks for one it can make.
+  static constexpr int64_t kLookAhead = 64;
+
+  void count_made() { made_.fetch_add(1, std::memory_order_release); }
+
+  // Until a call is made after `seen` calls were, or a call failed. Helpers run only where the machine has a
+  // core to spare for them (replay.py), so a spin that yields takes nothing from other work.
+  void wait_after(int64_t seen) {
+    for (int spins = 0; made_.load(std::memory_order_acquire) == seen && !failed_.load(std::memory_order_relaxed); ++spins)
+      if (spins > 64) std::this_thread::yield();
+  }
+
+  const std::shared_ptr<const Plan> plan_;
+  std::vector<c10::IValue> values_;
+  std::unique_ptr<std::atomic<int32_t>[]> pending_, readers_;
+  std::unique_ptr<std::atomic<bool>[]> taken_;  // per place in the order
+  std::atomic<int64_t> first_{0};  // every place before it is taken
+  std::atomic<int64_t> made_{0};
+  std::atomic<bool> failed_{false};
+  std::mutex error_mutex_;
+  std::exception_ptr error_;
 };
 
 // A constant as the dispatcher takes it. A Python number where the schema asks for a tensor becomes what
@@ -74,7 +197,7 @@ c10::IValue constant(const py::handle& value, const c10::TypePtr& type) {
 class Program {
  public:
   Program(int64_t slots, std::vector<int64_t> inputs, std::vector<int64_t> outputs)
-      : slots_(slots), inputs_(std::move(inputs)), outputs_(std::move(outputs)) {
+      : slots_(slots), inputs_(std::move(inputs)), outputs_(std::move(outputs)), plan_(std::make_shared<Plan>()) {
     for (const auto* slots_of : {&inputs_, &outputs_})
       for (const int64_t slot : *slots_of) TORCH_CHECK(slot >= 0 && slot < slots_, "slot ", slot, " out of range");
   }
@@ -117,15 +240,17 @@ class Program {
     }
     for (const int64_t slot : call.results) check(slot, true);
     for (const int64_t slot : call.freed) check(slot, false);
-    calls_.push_back(std::move(call));
+    plan_->calls.push_back(std::move(call));
   }
 
   // From now on `threads` threads make the calls together, each taking the first call in `order` whose
-  // calls in `after` are made: `order` must follow `after`, and `after` every value a call reads (which is
-  // checked) and every change in place. Every call computes what it did alone; only who makes it changes.
+  // calls in `after` are made, and the replay's own thread whatever the others leave (a helper that starts
+  // late, on a busy machine, costs nothing). `order` must follow `after`, and `after` every value a call
+  // reads (both checked) and every change in place. Every call computes what it did alone.
   void schedule(int64_t threads, std::vector<int64_t> order, const std::vector<std::vector<int64_t>>& after) {
-    const auto calls = static_cast<int64_t>(calls_.size());
-    TORCH_CHECK(threads >= 1 && order.size() == calls_.size() && after.size() == calls_.size(),
+    Plan& plan = *plan_;
+    const auto calls = static_cast<int64_t>(plan.calls.size());
+    TORCH_CHECK(threads >= 1 && order.size() == plan.calls.size() && after.size() == plan.calls.size(),
                 "a schedule takes a thread count, and an order and the calls to follow for each call");
     std::vector<int64_t> place(calls, -1);
     for (int64_t k = 0; k < calls; ++k) {
@@ -134,23 +259,23 @@ class Program {
     }
     std::vector<int64_t> made_by(slots_, -1);
     for (int64_t i = 0; i < calls; ++i)
-      for (const int64_t slot : calls_[i].results)
+      for (const int64_t slot : plan.calls[i].results)
         if (slot >= 0) made_by[slot] = i;
-    followed_.assign(calls, 0);
-    next_.assign(calls, {});
-    reads_.assign(calls, {});
-    readers_.assign(slots_, 0);
+    plan.followed.assign(calls, 0);
+    plan.next.assign(calls, {});
+    plan.reads.assign(calls, {});
+    plan.readers.assign(slots_, 0);
     for (int64_t i = 0; i < calls; ++i) {
       std::vector<int64_t> before(after[i]);
       std::sort(before.begin(), before.end());
       before.erase(std::unique(before.begin(), before.end()), before.end());
       for (const int64_t d : before) {
         TORCH_CHECK(d >= 0 && d < calls && place[d] < place[i], "call ", i, " follows call ", d, ", which the order puts after it");
-        next_[d].push_back(i);
+        plan.next[d].push_back(i);
       }
-      followed_[i] = static_cast<int32_t>(before.size());
-      std::vector<int64_t>& reads = reads_[i];
-      for (const Argument& argument : calls_[i].arguments) {
+      plan.followed[i] = static_cast<int32_t>(before.size());
+      std::vector<int64_t>& reads = plan.reads[i];
+      for (const Argument& argument : plan.calls[i].arguments) {
         if (argument.kind == Argument::Kind::Value) reads.push_back(argument.slot);
         for (const int64_t slot : argument.slots)
           if (slot >= 0) reads.push_back(slot);
@@ -160,21 +285,26 @@ class Program {
       for (const int64_t slot : reads) {
         TORCH_CHECK(made_by[slot] < 0 || std::binary_search(before.begin(), before.end(), made_by[slot]), "call ", i,
                     " reads what call ", made_by[slot], " makes without following it");
-        ++readers_[slot];
+        ++plan.readers[slot];
       }
     }
     for (const auto* kept : {&inputs_, &outputs_})
-      for (const int64_t slot : *kept) readers_[slot] = -1;  // never dropped
-    order_ = std::move(order);
-    threads_ = threads;
+      for (const int64_t slot : *kept) plan.readers[slot] = -1;
+    plan.order = std::move(order);
+    plan.threads = threads;
   }
 
   std::vector<at::Tensor> run(const std::vector<at::Tensor>& inputs) const {
     const BelowAutograd below_autograd;
-    if (threads_ > 1) return run_together(inputs);
+    if (plan_->threads > 1) {
+      const auto together = std::make_shared<Together>(plan_, start(inputs));
+      for (int64_t k = 1; k < plan_->threads; ++k) at::launch([together] { together->take_calls(); });
+      together->take_calls();
+      return finish(together->values());
+    }
     std::vector<c10::IValue> values = start(inputs);
     torch::jit::Stack stack;
-    for (const Call& call : calls_) {
+    for (const Call& call : plan_->calls) {
       make(call, values, stack);
       for (const int64_t slot : call.freed) values[slot] = c10::IValue();
     }
@@ -186,9 +316,9 @@ class Program {
     const BelowAutograd below_autograd;
     std::vector<c10::IValue> values = start(inputs);
     std::vector<int64_t> times;
-    times.reserve(calls_.size());
+    times.reserve(plan_->calls.size());
     torch::jit::Stack stack;
-    for (const Call& call : calls_) {
+    for (const Call& call : plan_->calls) {
       const auto begin = std::chrono::steady_clock::now();
       make(call, values, stack);
       times.push_back(std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now() - begin).count());
@@ -197,13 +327,6 @@ class Program {
   }
 
  private:
-  // Each thread that makes calls holds this while it does: the recorded operations are those autograd ran,
-  // and replayed below it they record no graph of their own.
-  using BelowAutograd = at::AutoDispatchBelowADInplaceOrView;
-
-  // How far past the first call not taken a thread looks for one it can make.
-  static constexpr int64_t kLookAhead = 64;
-
   std::vector<c10::IValue> start(const std::vector<at::Tensor>& inputs) const {
     TORCH_CHECK(inputs.size() == inputs_.size(), "the program takes ", inputs_.size(), " inputs, not ", inputs.size());
     std::vector<c10::IValue> values(slots_);
@@ -218,114 +341,9 @@ class Program {
     return outputs;
   }
 
-  // One call on the values: its arguments pushed, the operator called, its results kept.
-  static void make(const Call& call, std::vector<c10::IValue>& values, torch::jit::Stack& stack) {
-    stack.clear();
-    for (const Argument& argument : call.arguments) {
-      switch (argument.kind) {
-        case Argument::Kind::Value:
-          stack.push_back(values[argument.slot]);
-          break;
-        case Argument::Kind::Values:
-          if (argument.optional) {
-            c10::List<std::optional<at::Tensor>> list;
-            for (const int64_t slot : argument.slots)
-              list.push_back(slot < 0 ? std::nullopt : std::optional<at::Tensor>(values[slot].toTensor()));
-            stack.emplace_back(std::move(list));
-          } else {
-            c10::List<at::Tensor> list;
-            list.reserve(argument.slots.size());
-            for (const int64_t slot : argument.slots) list.push_back(values[slot].toTensor());
-            stack.emplace_back(std::move(list));
-          }
-          break;
-        case Argument::Kind::Constant:
-          stack.push_back(argument.constant);
-          break;
-      }
-    }
-    call.op.callBoxed(stack);
-    TORCH_CHECK(call.unpack || stack.size() >= call.results.size(), call.op.schema().name(), " returned ", stack.size(),
-                " values, not ", call.results.size());
-    if (call.unpack) {
-      const c10::List<at::Tensor> list = stack[0].toTensorList();
-      for (size_t k = 0; k < call.results.size(); ++k)
-        if (call.results[k] >= 0) values[call.results[k]] = list.get(k);
-    } else {
-      for (size_t k = 0; k < call.results.size(); ++k)
-        if (call.results[k] >= 0) values[call.results[k]] = std::move(stack[k]);
-    }
-  }
-
-  // This thread and threads_ - 1 helpers from torch's inter-op pool take calls as they become ready; this one
-  // makes whatever is left when helpers start late or not at all, so a busy machine costs no more than one
-  // thread. A value is read only after its call counted itself made (release, acquire), and dropped by the
-  // last call that reads it; an error in any call stops them all and is raised here.
-  std::vector<at::Tensor> run_together(const std::vector<at::Tensor>& inputs) const {
-    const auto shared = std::make_shared<Together>(calls_.size(), static_cast<size_t>(slots_));
-    Together& together = *shared;
-    together.values = start(inputs);
-    for (size_t i = 0; i < calls_.size(); ++i) {
-      together.pending[i].store(followed_[i], std::memory_order_relaxed);
-      together.taken[i].store(false, std::memory_order_relaxed);
-    }
-    for (int64_t slot = 0; slot < slots_; ++slot) together.readers[slot].store(readers_[slot], std::memory_order_relaxed);
-    for (int64_t k = 1; k < threads_; ++k) {
-      at::launch([shared, this] {
-        shared->inside.fetch_add(1);
-        if (!shared->closed.load()) take_calls(*shared);
-        shared->inside.fetch_sub(1);
-      });
-    }
-    take_calls(together);
-    together.closed.store(true);
-    while (together.inside.load() > 0) std::this_thread::yield();  // none reads this program after this
-    if (together.error) std::rethrow_exception(together.error);
-    return finish(together.values);
-  }
-
-  void take_calls(Together& together) const {
-    const BelowAutograd below_autograd;
-    const auto calls = static_cast<int64_t>(calls_.size());
-    torch::jit::Stack stack;
-    try {
-      for (int idle = 0; together.made.load(std::memory_order_acquire) < calls && !together.failed.load(std::memory_order_relaxed);) {
-        int64_t first = together.first.load(std::memory_order_relaxed);
-        while (first < calls && together.taken[first].load(std::memory_order_relaxed)) ++first;
-        if (first > together.first.load(std::memory_order_relaxed)) together.first.store(first, std::memory_order_relaxed);
-        int64_t call = -1;
-        for (int64_t k = first; k < std::min(calls, first + kLookAhead) && call < 0; ++k) {
-          if (together.taken[k].load(std::memory_order_relaxed) || together.pending[order_[k]].load(std::memory_order_acquire) > 0) continue;
-          if (!together.taken[k].exchange(true, std::memory_order_acq_rel)) call = order_[k];
-        }
-        if (call < 0) {
-          if (++idle > 64) std::this_thread::yield();
-          continue;
-        }
-        idle = 0;
-        make(calls_[call], together.values, stack);
-        stack.clear();
-        for (const int64_t slot : reads_[call])
-          if (together.readers[slot].fetch_sub(1, std::memory_order_acq_rel) == 1) together.values[slot] = c10::IValue();
-        for (const int64_t next : next_[call]) together.pending[next].fetch_sub(1, std::memory_order_release);
-        together.made.fetch_add(1, std::memory_order_release);
-      }
-    } catch (...) {
-      const std::lock_guard<std::mutex> lock(together.error_mutex);
-      if (!together.failed.exchange(true)) together.error = std::current_exception();
-    }
-  }
-
   int64_t slots_;
   std::vector<int64_t> inputs_, outputs_;
-  std::vector<Call> calls_;
-  // Set by schedule: how many threads make the calls, in which order they are taken, per call how many calls
-  // it follows and which follow it, the values it reads; per value how many calls read it (-1: kept).
-  int64_t threads_ = 1;
-  std::vector<int64_t> order_;
-  std::vector<int32_t> followed_;
-  std::vector<std::vector<int64_t>> next_, reads_;
-  std::vector<int32_t> readers_;
+  std::shared_ptr<Plan> plan_;  // shared with the replays in flight, which may outlive a call to run
 };
 
 }  // namespace

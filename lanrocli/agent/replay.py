@@ -34,7 +34,6 @@ from lanrocli.agent.losses import Learner, UpdateTensors, sac_losses
 from lanrocli.agent.native import REPLAY, load
 from lanrocli.language import PAD_ID
 
-MAX_LANES = 2  # an update's longest chain of calls is about two fifths of its work: a third lane would wait
 TIMED_RUNS = 4
 
 
@@ -253,10 +252,12 @@ class ReplayedGradients:
             ) from error
 
 
-def update_threads() -> int:
-    """How many threads a replayed update runs on by default: torch's inter-op threads
-    (``torch.set_num_interop_threads``; by default the machine's cores), at most ``MAX_LANES``."""
-    return max(1, min(MAX_LANES, torch.get_num_interop_threads()))
+def update_threads(workers: int) -> int:
+    """How many threads a training's replayed update runs on: two where torch's inter-op threads (by default
+    the machine's cores; a sweep's trial sets one) leave a core for a helper beside the training's own thread
+    and its ``workers`` environment processes, else one. Without that core the helper takes the simulation's
+    and the training is no faster (docs/performance.md)."""
+    return 2 if torch.get_num_interop_threads() >= workers + 2 else 1
 
 
 def replayed_gradients(

@@ -20,7 +20,7 @@ from lanrocli.agent.noise import restore_generator
 from lanrocli.agent.losses import UpdateTensors, compile_problem, compiled_losses, sac_losses
 from lanrocli.agent.networks import Actor, Critic, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
-from lanrocli.agent.replay import ReplayedGradients, replayed_gradients, update_threads
+from lanrocli.agent.replay import ReplayedGradients, replayed_gradients
 from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
 from lanrocli.agent.transitions import Batch
 from lanrocli.choices import ActingAttention
@@ -106,7 +106,7 @@ class SACAgent:
             raise ValueError(problem)
         self._losses = compiled_losses() if s.compile else sac_losses
         self._replay: ReplayedGradients | None = None
-        self.update_threads = update_threads()  # the replay's; the same numbers for any
+        self.update_threads = 1  # the replay's (a training's: replay.update_threads); the same numbers for any
         self._replay_pending = s.replay and not s.compile  # made at the first update, when its C++ is built
 
     def _learning_rates(self) -> list[float]:

@@ -5,6 +5,7 @@ Tune. The run folder is the record; Tune only carries progress to the sweep's di
 
 from __future__ import annotations
 
+import contextlib
 import time
 from pathlib import Path
 from typing import Any
@@ -81,6 +82,8 @@ def train_trial(job: TrialJob) -> None:
         return
     if job.device == "cpu":
         torch.set_num_threads(1)
+        with contextlib.suppress(RuntimeError):  # set once per process: a worker that ran a trial before has
+            torch.set_num_interop_threads(1)  # the trials share the cores: updates without a helper thread
     plan = validate(Curriculum, yaml.safe_load(job.curriculum), {}, f"the curriculum of trial {job.name}")
     if trial_started(out):
         _wait_for_lock(out)

@@ -170,3 +170,11 @@ def test_losses_that_branch_on_a_value_fail_to_record_and_say_how_to_update_from
     agent = _agent(architecture="objects")
     with pytest.raises(RuntimeError, match="could not be recorded for its replay .*agent.replay: false"):
         agent.update(_grounding_batch(np.random.default_rng(0), 64))
+
+
+@pytest.mark.parametrize(("cores", "workers", "threads"), [(2, 2, 1), (3, 2, 1), (4, 2, 2), (2, 0, 2), (1, 0, 1)])
+def test_a_training_updates_on_two_threads_only_where_a_core_is_spare(
+    monkeypatch: pytest.MonkeyPatch, cores: int, workers: int, threads: int
+) -> None:
+    monkeypatch.setattr(torch, "get_num_interop_threads", lambda: cores)
+    assert replay.update_threads(workers) == threads
