@@ -53,12 +53,16 @@ class Stopwatch:
 
 
 def run_ours(
-    steps: int, envs: int, learning_starts: int, seed: int, agent: SACSettings, buffer: BufferSettings, device: str
+    steps: int, envs: int, learning_starts: int, seed: int, agent: SACSettings, buffer: BufferSettings, device: str,
+    update_threads: int | None = None,
 ) -> dict[str, float]:
+    """``update_threads``: the replayed update's (``SACAgent.update_threads``), or as a training chooses them."""
     settings = TrainSettings(
         task="reach", env=EnvSettings(objects=2), seed=seed, envs=envs, learning_starts=learning_starts, buffer=buffer
     )
     trainer = Trainer(settings, agent, device=device)
+    if update_threads is not None:
+        trainer.agent.update_threads = update_threads
     simulation, sampling, updating = Stopwatch(), Stopwatch(), Stopwatch()
     trainer.run(envs)  # start the environments before the clock
     collector = trainer._collector
@@ -127,7 +131,7 @@ def main() -> None:
     parser.add_argument("--learning-starts", type=int, default=500)
     parser.add_argument("--threads", type=int, default=1, help="torch's threads within an operation (both agents)")
     parser.add_argument("--sb3-threads", type=int, help="stable-baselines3's alone (default: --threads)")
-    parser.add_argument("--interop-threads", type=int, help="torch's threads between operations: our replayed update's (default: the machine's cores, at most 2)")
+    parser.add_argument("--update-threads", type=int, help="our replayed update's threads (default: as a training chooses)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--batch-size", type=int, help="of both agents (default: 256, or the curriculum's)")
     parser.add_argument("--architecture", choices=["flat", "objects"], help="of our agent (default: flat)")
@@ -142,8 +146,6 @@ def main() -> None:
     if args.curriculum is not None and args.architecture is not None:
         parser.error("--architecture and --curriculum both choose our agent: give one")
     torch.set_num_threads(args.threads)
-    if args.interop_threads is not None:
-        torch.set_num_interop_threads(args.interop_threads)
     if args.curriculum is not None:
         curriculum = load_curriculum(find_curriculum(args.curriculum))
         agent, buffer = curriculum.agent.settings(), curriculum.buffer.settings()
@@ -157,7 +159,7 @@ def main() -> None:
     rounds = []
     for _ in range(args.rounds):
         torch.set_num_threads(args.threads)
-        result = run_ours(args.steps, args.envs, args.learning_starts, args.seed, agent, buffer, args.device)
+        result = run_ours(args.steps, args.envs, args.learning_starts, args.seed, agent, buffer, args.device, args.update_threads)
         torch.set_num_threads(args.threads if args.sb3_threads is None else args.sb3_threads)
         sb3 = run_sb3(args.steps, args.envs, args.learning_starts, args.seed, agent.batch_size, args.device)
         if sb3 is not None:

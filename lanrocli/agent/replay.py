@@ -34,7 +34,7 @@ from lanrocli.agent.losses import Learner, UpdateTensors, sac_losses
 from lanrocli.agent.native import REPLAY, load
 from lanrocli.language import PAD_ID
 
-TIMED_RUNS = 4
+TIMED_RUNS = 4  # runs of a recording timed one call at a time, the fastest of each call's times kept
 
 
 class Recording:
@@ -42,7 +42,7 @@ class Recording:
     it ran."""
 
     def __init__(
-        self, function: Callable[..., Sequence[torch.Tensor]], inputs: Sequence[torch.Tensor], native: Any, lanes: int = 1
+        self, function: Callable[..., Sequence[torch.Tensor]], inputs: Sequence[torch.Tensor], native: Any, threads: int = 1
     ) -> None:
         graph = make_fx(function)(*inputs).graph
         graph.eliminate_dead_code()
@@ -50,11 +50,11 @@ class Recording:
         if constants:
             raise ValueError(f"the recorded function read tensors that are not its inputs ({', '.join(map(str, constants))}); pass them in")
         self._program, calls = _program(graph, native)
-        if lanes > 1:
+        if threads > 1:
             # Ordered on what each call took here, the fastest of a few runs (the first warms the kernels).
             times = [self._program.timed(list(inputs))[1] for _ in range(TIMED_RUNS)]
             calls.costs = [min(took) / 1000 for took in zip(*times)]
-            self._program.schedule(lanes, *calls.order())
+            self._program.schedule(threads, *calls.order())
 
     def __call__(self, inputs: Sequence[torch.Tensor]) -> list[torch.Tensor]:
         return self._program.run(list(inputs))
@@ -131,10 +131,11 @@ def _aliased(schema: Any, arguments: list[tuple[str, Any]]) -> tuple[list[int], 
     changes in place."""
     shared, written = [], []
     for declared, (kind, value) in zip(schema.arguments, arguments):
-        if declared.alias_info is not None and kind == "value":
-            shared.append(value)
+        if declared.alias_info is not None and kind != "constant":
+            slots = [value] if kind == "value" else [slot for slot in value if slot >= 0]
+            shared += slots
             if declared.alias_info.is_write:
-                written.append(value)
+                written += slots
     return shared, written
 
 
@@ -193,9 +194,9 @@ class ReplayedGradients:
     :func:`~lanrocli.agent.losses.sac_losses`, and the gradients of the losses' sum for the ``learned`` tensors."""
 
     def __init__(
-        self, native: Any, agent: Learner, learned: Sequence[torch.Tensor], encoders: Sequence[LanguageEncoder], lanes: int = 1
+        self, native: Any, agent: Learner, learned: Sequence[torch.Tensor], encoders: Sequence[LanguageEncoder], threads: int = 1
     ) -> None:
-        self._native, self.lanes = native, lanes
+        self._native, self._threads = native, threads
         self._agent, self._learned, self._encoders = agent, list(learned), list(encoders)
         # Everything the update reads of the agent: its networks (encoders included) and the temperature, taken
         # once: the optimiser and load_state_dict change them in place, as they must for a replay to see it.
@@ -206,7 +207,7 @@ class ReplayedGradients:
         """A copy of the agent gets a replay of its own, which records anew: a recording holds the tensors of
         the agent it was made for."""
         copied = ReplayedGradients.__new__(ReplayedGradients)
-        copied._native, copied.lanes, copied._recordings = self._native, self.lanes, {}
+        copied._native, copied._threads, copied._recordings = self._native, self._threads, {}
         # Through the memo, to the copy's own tensors (which may not be whole yet: no attribute is read here).
         copied._agent, copied._learned, copied._encoders, copied._state = (
             copy.deepcopy(x, memo) for x in (self._agent, self._learned, self._encoders, self._state)
@@ -244,7 +245,7 @@ class ReplayedGradients:
             return [*(grad for grad in grads if grad is not None), metrics]
 
         try:
-            return Recording(gradients, [*self._state, tokens, *tensors], self._native, self.lanes), has_gradient
+            return Recording(gradients, [*self._state, tokens, *tensors], self._native, self._threads), has_gradient
         except RuntimeError as error:  # a branch on a tensor's value, most likely: Python that needs the values
             raise RuntimeError(
                 f"the update could not be recorded for its replay ({error}); sac_losses and the networks must be "
@@ -261,12 +262,12 @@ def update_threads(workers: int) -> int:
 
 
 def replayed_gradients(
-    agent: Learner, learned: Sequence[torch.Tensor], encoders: Sequence[LanguageEncoder], device: torch.device, lanes: int = 1
+    agent: Learner, learned: Sequence[torch.Tensor], encoders: Sequence[LanguageEncoder], device: torch.device, threads: int = 1
 ) -> ReplayedGradients | None:
-    """The replay of ``agent``'s update on ``device``, in ``lanes`` threads, or None where there is none: on CUDA
+    """The replay of ``agent``'s update on ``device``, on ``threads`` threads, or None where there is none: on CUDA
     (recorded and checked on CPU only), or on a machine that cannot build ``replay.cpp`` or the C++ reading
     (whose one call a recording holds where the Python reading's steps depend on the batch), each warned once."""
     if native_reading(device) is None:
         return None
     native = load(REPLAY)
-    return None if native is None else ReplayedGradients(native, agent, learned, encoders, lanes)
+    return None if native is None else ReplayedGradients(native, agent, learned, encoders, threads)

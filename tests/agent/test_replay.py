@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import warnings
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -99,16 +100,27 @@ def test_a_recording_replays_on_new_values_and_refuses_a_tensor_that_is_not_an_i
         replay.Recording(lambda x: [x @ weight.detach()], [x], built)
 
 
-def test_calls_made_by_two_threads_follow_what_they_read_and_every_change_in_place() -> None:
+def _changed(x: torch.Tensor) -> list[torch.Tensor]:
+    y = x * 1.0
+    row = y[0]  # a view: it sees the change below
+    before = row + 1.0
+    y.mul_(2.0)
+    return [before, row + 1.0, y.sum(0)]
+
+
+def _changed_in_a_list(x: torch.Tensor) -> list[torch.Tensor]:
+    y = x * 1.0
+    row = y[1]
+    before = row * 3.0
+    torch._foreach_mul_([x * 2.0, y], 2.0)  # a list of tensors changed in place
+    return [before, row * 3.0]
+
+
+@pytest.mark.parametrize("changed", [_changed, _changed_in_a_list])
+def test_calls_made_by_two_threads_follow_what_they_read_and_every_change_in_place(
+    changed: Callable[[torch.Tensor], list[torch.Tensor]],
+) -> None:
     built = native.load(native.REPLAY)
-
-    def changed(x: torch.Tensor) -> list[torch.Tensor]:
-        y = x * 1.0
-        row = y[0]  # a view: it sees the change below
-        before = row + 1.0
-        y.mul_(2.0)
-        return [before, row + 1.0, y.sum(0)]
-
     x = torch.randn(5, 3)
     graph = make_fx(changed)(x).graph
     program, calls = replay._program(graph, built)
@@ -119,7 +131,7 @@ def test_calls_made_by_two_threads_follow_what_they_read_and_every_change_in_pla
     assert min(readers) < changing < max(readers)
     assert all(index in after[changing] for index in readers if index < changing)  # read before, made before
     assert all(changing in after[index] for index in readers if index > changing)  # read after, made after
-    recording = replay.Recording(changed, [x], built, lanes=2)
+    recording = replay.Recording(changed, [x], built, threads=2)
     for _ in range(200):
         y = torch.randn(5, 3)
         assert all(torch.equal(a, b) for a, b in zip(recording([y]), changed(y)))
@@ -138,7 +150,7 @@ def test_an_error_in_a_call_made_by_a_helper_thread_is_raised_and_the_program_ru
         return list(torch.autograd.grad((a * b).sum(), w))
 
     x = torch.randn(4, 3)
-    recording = replay.Recording(gradients, [x, weight], built, lanes=2)
+    recording = replay.Recording(gradients, [x, weight], built, threads=2)
     for _ in range(20):
         with pytest.raises(RuntimeError, match="cannot be multiplied|size"):
             recording([torch.randn(4, 5), weight])
