@@ -130,7 +130,6 @@ def main() -> None:
     parser.add_argument("--envs", type=int, default=2)
     parser.add_argument("--learning-starts", type=int, default=500)
     parser.add_argument("--threads", type=int, default=1, help="torch's threads within an operation (both agents)")
-    parser.add_argument("--sb3-threads", type=int, help="stable-baselines3's alone (default: --threads)")
     parser.add_argument("--update-threads", type=int, help="our replayed update's threads (default: as a training chooses)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--batch-size", type=int, help="of both agents (default: 256, or the curriculum's)")
@@ -158,9 +157,7 @@ def main() -> None:
 
     rounds = []
     for _ in range(args.rounds):
-        torch.set_num_threads(args.threads)
         result = run_ours(args.steps, args.envs, args.learning_starts, args.seed, agent, buffer, args.device, args.update_threads)
-        torch.set_num_threads(args.threads if args.sb3_threads is None else args.sb3_threads)
         sb3 = run_sb3(args.steps, args.envs, args.learning_starts, args.seed, agent.batch_size, args.device)
         if sb3 is not None:
             result.update(sb3, ratio=result["env_steps_per_s"] / sb3["sb3_env_steps_per_s"])
