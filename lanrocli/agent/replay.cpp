@@ -22,6 +22,8 @@
 #include <utility>
 #include <vector>
 
+#include <unistd.h>
+
 namespace py = pybind11;
 
 namespace {
@@ -48,6 +50,7 @@ struct Call {
 struct Plan {
   std::vector<Call> calls;
   int64_t threads = 1;
+  pid_t process = 0;  // that scheduled it
   std::vector<int64_t> order;
   std::vector<int32_t> followed;
   std::vector<std::vector<int64_t>> next, reads;
@@ -206,6 +209,7 @@ class Program {
   // ("values", [slots]) or ("constant", a Python value, converted by the argument's type in the schema).
   void add(const std::string& name, const std::string& overload, const py::list& arguments,
            std::vector<int64_t> results, bool unpack, std::vector<int64_t> freed) {
+    TORCH_CHECK(plan_->order.empty(), "a call added after the schedule: add every call first");
     const c10::OperatorHandle op = c10::Dispatcher::singleton().findSchemaOrThrow(name.c_str(), overload.c_str());
     const auto& schema = op.schema().arguments();
     TORCH_CHECK(arguments.size() == schema.size(), name, ".", overload, " takes ", schema.size(), " arguments, not ",
@@ -250,6 +254,7 @@ class Program {
   void schedule(int64_t threads, std::vector<int64_t> order, const std::vector<std::vector<int64_t>>& after) {
     Plan& plan = *plan_;
     const auto calls = static_cast<int64_t>(plan.calls.size());
+    TORCH_CHECK(plan.order.empty(), "the program is scheduled already");  // a replay in flight may be reading it
     TORCH_CHECK(threads >= 1 && order.size() == plan.calls.size() && after.size() == plan.calls.size(),
                 "a schedule takes a thread count, and an order and the calls to follow for each call");
     std::vector<int64_t> place(calls, -1);
@@ -292,13 +297,21 @@ class Program {
       for (const int64_t slot : *kept) plan.readers[slot] = -1;
     plan.order = std::move(order);
     plan.threads = threads;
+    plan.process = getpid();
   }
 
   std::vector<at::Tensor> run(const std::vector<at::Tensor>& inputs) const {
     const BelowAutograd below_autograd;
-    if (plan_->threads > 1) {
+    // In a process forked from the one that scheduled it, torch's inter-op pool has no threads: one after another.
+    if (plan_->threads > 1 && getpid() == plan_->process) {
       const auto together = std::make_shared<Together>(plan_, start(inputs));
-      for (int64_t k = 1; k < plan_->threads; ++k) at::launch([together] { together->take_calls(); });
+      // A helper whose calls would split their work over another number of threads than this thread's could
+      // round differently: it leaves them all to this one.
+      const int within = at::get_num_threads();
+      for (int64_t k = 1; k < plan_->threads; ++k)
+        at::launch([together, within] {
+          if (at::get_num_threads() == within) together->take_calls();
+        });
       together->take_calls();
       return finish(together->values());
     }

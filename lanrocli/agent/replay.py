@@ -51,9 +51,10 @@ class Recording:
             raise ValueError(f"the recorded function read tensors that are not its inputs ({', '.join(map(str, constants))}); pass them in")
         self._program, calls = _program(graph, native)
         if threads > 1:
-            # Ordered on what each call took here, the fastest of a few runs (the first warms the kernels).
-            times = [self._program.timed(list(inputs))[1] for _ in range(TIMED_RUNS)]
-            calls.costs = [min(took) / 1000 for took in zip(*times)]
+            # Ordered on what each call took here, the fastest of a few runs (the first warms the kernels), unless
+            # the calls change their inputs, which running them again would change.
+            times = [self._program.timed(list(inputs))[1] for _ in range(0 if calls.changes_inputs() else TIMED_RUNS)]
+            calls.costs = [min(took) / 1000 for took in zip(*times)] if times else [1.0] * len(calls.reads)
             self._program.schedule(threads, *calls.order())
 
     def __call__(self, inputs: Sequence[torch.Tensor]) -> list[torch.Tensor]:
@@ -85,6 +86,7 @@ def _program(graph: Graph, native: Any) -> tuple[Any, _Calls]:
 
     inputs = [keep(node) for node in graph.nodes if node.op == "placeholder"]
     calls = []
+    drawn: list[bool] = []  # the calls that draw random numbers
     for node in graph.nodes:
         if node.op != "call_function" or node.target is operator.getitem:
             continue
@@ -102,6 +104,7 @@ def _program(graph: Graph, native: Any) -> tuple[Any, _Calls]:
             results = [keep(node)] if returns else []
         given = [node.args[i] if i < len(node.args) else node.kwargs.get(a.name, a.default_value) for i, a in enumerate(schema.arguments)]
         calls.append((schema, [argument(value) for value in given], results, unpack))
+        drawn.append(torch.Tag.nondeterministic_seeded in node.target.tags)
     (output,) = [node for node in graph.nodes if node.op == "output"]
     outputs = [slot(node) for node in output.args[0]]
     if len(set(outputs)) < len(outputs):  # the replay would hand out one tensor twice, where Python gives two
@@ -122,21 +125,24 @@ def _program(graph: Graph, native: Any) -> tuple[Any, _Calls]:
         program.add(schema.name, schema.overload_name, arguments, results, unpack, freed.get(index, []))
     reads = [[read for kind, value in arguments for read in ([value] if kind == "value" else value if kind == "values" else []) if read >= 0]
              for _, arguments, _, _ in calls]
-    aliased = [_aliased(schema, arguments) for schema, arguments, _, _ in calls]
-    return program, _Calls(reads, [results for *_, results, _ in calls], *map(list, zip(*aliased)), {*inputs, *outputs})
+    return program, _Calls(reads, [results for *_, results, _ in calls], [_aliasing(schema) for schema, *_ in calls],
+                           [_written(schema, arguments) for schema, arguments, _, _ in calls], drawn)
 
 
-def _aliased(schema: Any, arguments: list[tuple[str, Any]]) -> tuple[list[int], list[int]]:
-    """The slots of a call's arguments that its results may share memory with (a view's base), and those it
-    changes in place."""
-    shared, written = [], []
-    for declared, (kind, value) in zip(schema.arguments, arguments):
-        if declared.alias_info is not None and kind != "constant":
-            slots = [value] if kind == "value" else [slot for slot in value if slot >= 0]
-            shared += slots
-            if declared.alias_info.is_write:
-                written += slots
-    return shared, written
+def _slots(kind: str, value: Any) -> list[int]:
+    return [value] if kind == "value" else [slot for slot in value if slot >= 0] if kind == "values" else []
+
+
+def _aliasing(schema: Any) -> bool:
+    """Whether a call's results may share memory with its arguments (a view): its schema says so, or it is
+    ``_unsafe_view``, a view whose schema does not."""
+    return schema.name == "aten::_unsafe_view" or any(a.alias_info is not None for a in schema.arguments)
+
+
+def _written(schema: Any, arguments: list[tuple[str, Any]]) -> list[int]:
+    """The slots of a call's arguments it changes in place."""
+    return [slot for declared, (kind, value) in zip(schema.arguments, arguments)
+            if declared.alias_info is not None and declared.alias_info.is_write for slot in _slots(kind, value)]
 
 
 @dataclass
@@ -145,35 +151,34 @@ class _Calls:
 
     reads: list[list[int]]  # the slots each call reads
     results: list[list[int]]  # the slots it writes (-1: a result nothing reads)
-    shared: list[list[int]]  # the slots of its arguments whose memory its results may share (a view's base)
+    aliasing: list[bool]  # whether its results may share memory with its arguments
     written: list[list[int]]  # the slots of its arguments it changes in place
-    kept: set[int]  # the inputs and outputs, never dropped
+    drawn: list[bool]  # whether it draws random numbers
     costs: list[float] = field(default_factory=list)  # microseconds each took, one after another
 
+    def changes_inputs(self) -> bool:
+        made = {slot for results in self.results for slot in results}
+        return any(slot not in made for written in self.written for slot in written)
+
     def after(self) -> list[set[int]]:
-        """The calls each call must follow: those that made what it reads, and, where a call changes a tensor
-        in place, every call that reads that tensor's memory (it, a view of it, its base) before it goes before
-        it and every one after it goes after it."""
+        """The calls each call must follow: those that made what it reads; and all calls before it, where it
+        draws random numbers or changes a tensor in place, which all calls after it then follow. A change in
+        place follows only the call that made its tensor where that tensor is a fresh result (not a view, not
+        an input) which no other call reads: nothing else can see it."""
         made_by = {slot: index for index, results in enumerate(self.results) for slot in results if slot >= 0}
-        memory = {slot: {slot} for results in self.results for slot in results if slot >= 0}
-        for reads in self.reads:
-            for slot in reads:
-                memory.setdefault(slot, {slot})
-        for results, shared in zip(self.results, self.shared):
-            joined = set().union(*(memory[slot] for slot in [*shared, *results] if slot >= 0))
-            for slot in joined:
-                memory[slot] = joined
-        after = [{made_by[slot] for slot in reads if slot in made_by} for reads in self.reads]
         readers: dict[int, list[int]] = {}
         for index, reads in enumerate(self.reads):
             for slot in reads:
                 readers.setdefault(slot, []).append(index)
+        after = [{made_by[slot] for slot in reads if slot in made_by} for reads in self.reads]
+        barrier: int | None = None
         for index, written in enumerate(self.written):
-            for touching in {reader for slot in written for other in memory[slot] for reader in readers.get(other, [])}:
-                if touching < index:
-                    after[index].add(touching)
-                elif touching > index:
-                    after[touching].add(index)
+            unseen = all(slot in made_by and not self.aliasing[made_by[slot]] and readers[slot] == [index] for slot in written)
+            if self.drawn[index] or not unseen:
+                after[index] |= set(range(index))
+                barrier = index
+            elif barrier is not None:
+                after[index].add(barrier)
         return after
 
     def order(self) -> tuple[list[int], list[list[int]]]:

@@ -126,7 +126,7 @@ def test_calls_made_by_two_threads_follow_what_they_read_and_every_change_in_pla
     program, calls = replay._program(graph, built)
     after = calls.after()
     (changing,) = [index for index, written in enumerate(calls.written) if written]
-    (view,) = [index for index, shared in enumerate(calls.shared) if shared and index != changing]
+    (view,) = [index for index, aliasing in enumerate(calls.aliasing) if aliasing and index != changing]
     readers = [index for index, reads in enumerate(calls.reads) if set(reads) & set(calls.results[view])]
     assert min(readers) < changing < max(readers)
     assert all(index in after[changing] for index in readers if index < changing)  # read before, made before
@@ -139,6 +139,29 @@ def test_calls_made_by_two_threads_follow_what_they_read_and_every_change_in_pla
     order, after_lists = calls.order()
     with pytest.raises(RuntimeError, match="which the order puts after it"):
         program.schedule(2, order[::-1], after_lists)
+
+
+def test_two_threads_keep_random_draws_in_order_and_leave_a_change_nothing_else_sees_unordered() -> None:
+    built = native.load(native.REPLAY)
+
+    def drawn(x: torch.Tensor) -> list[torch.Tensor]:
+        inside = (x > 0).logical_and_(x < 1)  # a fresh result only the change reads: no other call sees it
+        return [x + torch.randn(5, 3), x * torch.rand(5, 3), inside.float(), x.sin()]
+
+    x = torch.randn(5, 3)
+    _, calls = replay._program(make_fx(drawn)(x).graph, built)
+    after = calls.after()
+    first, second = [index for index, draws in enumerate(calls.drawn) if draws]
+    (changing,) = [index for index, written in enumerate(calls.written) if written]
+    assert first in after[second]  # the second draw after the first
+    unrelated = [i for i in range(changing + 1, len(after)) if not calls.drawn[i] and not set(calls.reads[i]) & set(calls.results[changing])]
+    assert unrelated and all(changing not in after[i] for i in unrelated)
+    recording = replay.Recording(drawn, [x], built, threads=2)
+    for seed in range(50):
+        torch.manual_seed(seed)
+        want = drawn(x)
+        torch.manual_seed(seed)
+        assert all(torch.equal(a, b) for a, b in zip(recording([x]), want))
 
 
 def test_an_error_in_a_call_made_by_a_helper_thread_is_raised_and_the_program_runs_after() -> None:
