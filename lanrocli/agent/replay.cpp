@@ -98,7 +98,6 @@ void make(const Call& call, std::vector<c10::IValue>& values, torch::jit::Stack&
     for (size_t k = 0; k < call.results.size(); ++k)
       if (call.results[k] >= 0) values[call.results[k]] = std::move(stack[k]);
   }
-  stack.clear();
 }
 
 // One replay made by several threads: the plan, the values, what each call still waits for, how many calls

@@ -110,12 +110,8 @@ def _program(graph: Graph, native: Any) -> tuple[Any, _Calls]:
     if len(set(outputs)) < len(outputs):  # the replay would hand out one tensor twice, where Python gives two
         raise ValueError("the recorded function returns one tensor in two places; return each once")
 
-    last_read = {}
-    for index, (_, arguments, _, _) in enumerate(calls):
-        for kind, value in arguments:
-            for read in [value] if kind == "value" else value if kind == "values" else []:
-                if read >= 0:
-                    last_read[read] = index
+    reads = [[read for kind, value in arguments for read in _slots(kind, value)] for _, arguments, _, _ in calls]
+    last_read = {read: index for index, read_by in enumerate(reads) for read in read_by}
     freed: dict[int, list[int]] = {}
     for read, index in last_read.items():
         if read not in outputs and read not in inputs:
@@ -123,13 +119,12 @@ def _program(graph: Graph, native: Any) -> tuple[Any, _Calls]:
     program = native.Program(len(slots), inputs, outputs)
     for index, (schema, arguments, results, unpack) in enumerate(calls):
         program.add(schema.name, schema.overload_name, arguments, results, unpack, freed.get(index, []))
-    reads = [[read for kind, value in arguments for read in ([value] if kind == "value" else value if kind == "values" else []) if read >= 0]
-             for _, arguments, _, _ in calls]
     return program, _Calls(reads, [results for *_, results, _ in calls], [_aliasing(schema) for schema, *_ in calls],
                            [_written(schema, arguments) for schema, arguments, _, _ in calls], drawn)
 
 
 def _slots(kind: str, value: Any) -> list[int]:
+    """The slots an argument reads (none for a constant, and none for an optional tensor left out)."""
     return [value] if kind == "value" else [slot for slot in value if slot >= 0] if kind == "values" else []
 
 
@@ -157,6 +152,7 @@ class _Calls:
     costs: list[float] = field(default_factory=list)  # microseconds each took, one after another
 
     def changes_inputs(self) -> bool:
+        """Whether a call changes in place a slot no call made: an input."""
         made = {slot for results in self.results for slot in results}
         return any(slot not in made for written in self.written for slot in written)
 
