@@ -34,7 +34,7 @@ import torch
 from recorded_batches import batch_arguments, record_batches, twin
 
 from lanrocli.agent.encoder import encode, stacked_gates
-from lanrocli.agent.losses import UpdateTensors, sac_losses
+from lanrocli.agent.losses import UpdateTensors, sac_losses, update_tensors
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import UPDATE_METRICS
 from lanrocli.agent.transitions import Batch
@@ -69,8 +69,9 @@ def whole_losses(
 def whole_update(agent: SACAgent, compiled: Callable[..., tuple[torch.Tensor, torch.Tensor]], batch: Batch) -> dict[str, float]:
     """One update of ``agent`` with the losses compiled whole: as ``SACAgent.update``, but for the sentences'
     reading."""
-    tensors, tokens = agent._update_inputs(batch)
-    loss, metrics = compiled(agent, tensors, tokens, batch.labelled)
+    sampled, tokens = agent._sampled_tensors(batch)
+    loss, metrics = compiled(agent, update_tensors(agent, sampled), tokens, batch.labelled)
+    del loss_placeholderagent, tensors, tokens, batch.labelled)
     agent._backward(loss)
     agent._step()
     return dict(zip(UPDATE_METRICS, metrics.tolist()))
@@ -82,11 +83,11 @@ def read_in_advance(agent: SACAgent, batches: list[Batch]) -> Callable[[Batch], 
     leaves that take their gradient, so the backward pass stops where the encoders' would begin."""
     reader = SACAgent.from_state_dict(agent.state_dict(), agent.device)
     with torch.no_grad():
-        summaries = [encode(reader._update_encoders(), reader._update_inputs(batch)[1]) for batch in batches]
+        summaries = [encode(reader._update_encoders(), reader._sampled_tensors(batch)[1]) for batch in batches]
     by_batch = {id(batch): summary for batch, summary in zip(batches, summaries)}
 
     def update(batch: Batch) -> None:
-        tensors, _ = agent._update_inputs(batch)
+        tensors = update_tensors(agent, agent._sampled_tensors(batch)[0])
         read = by_batch[id(batch)].clone().requires_grad_()
         loss, _ = agent._losses(agent, read, tensors, batch.labelled)
         agent._backward(loss)

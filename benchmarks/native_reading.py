@@ -26,7 +26,7 @@ from lanrocli.agent.transitions import Batch
 
 def read_all(agent: SACAgent, batches: list[Batch]) -> Callable[[], None]:
     """Each batch's sentences read by the networks an update reads them with, and the gradient sent back."""
-    tokens = [agent._update_inputs(batch)[1] for batch in batches]
+    tokens = [agent._sampled_tensors(batch)[1] for batch in batches]
     encoders = agent._update_encoders()
     trained = sum(any(p.requires_grad for p in encoder.parameters()) for encoder in encoders)
 

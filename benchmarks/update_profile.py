@@ -30,6 +30,7 @@ from torch.utils.flop_counter import FlopCounterMode
 from recorded_batches import batch_arguments, record_batches, twin
 
 from lanrocli.agent import encoder
+from lanrocli.agent.losses import update_tensors
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.transitions import Batch
 
@@ -40,15 +41,15 @@ def time_parts(agent: SACAgent, batches: list[Batch]) -> dict[str, float]:
     seconds = dict.fromkeys(parts, 0.0)
     for batch in batches:
         times = [time.perf_counter()]
-        tensors, tokens = agent._update_inputs(batch)
+        sampled, tokens = agent._sampled_tensors(batch)
         times.append(time.perf_counter())
         if replayed:
-            metrics = agent._gradients(tokens, tensors, batch.labelled)
+            metrics = agent._gradients(tokens, sampled, batch.labelled)
             times.append(time.perf_counter())
         else:  # the backward pass and the step are one part
             summaries = encoder.encode(agent._update_encoders(), tokens)
             times.append(time.perf_counter())
-            loss, metrics = agent._losses(agent, summaries, tensors, batch.labelled)
+            loss, metrics = agent._losses(agent, summaries, update_tensors(agent, sampled), batch.labelled)
             times.append(time.perf_counter())
             agent._backward(loss)
         agent._step()

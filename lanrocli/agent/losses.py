@@ -13,7 +13,8 @@ from typing import NamedTuple, Protocol
 
 import torch
 
-from lanrocli.agent.networks import Actor, Critic, attention_loss
+from lanrocli.agent.networks import Actor, Critic, ObjectLayout, attention_loss
+from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.settings import SACSettings
 from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
 
@@ -27,6 +28,24 @@ class Learner(Protocol):
     target_critic: Critic
     log_alpha: torch.Tensor
     target_entropy: float
+    normalizer: RunningNormalizer
+    layout: ObjectLayout | None
+
+
+class SampledTensors(NamedTuple):
+    """A sampled batch as tensors, as the buffer gave it: what an update is a function of. ``observations``
+    holds the batch's observations followed by its next ones, raw; ``noise`` and ``next_noise`` are the
+    policy's standard normal draws, made by the agent from its own stream."""
+
+    observations: torch.Tensor
+    action: torch.Tensor
+    reward: torch.Tensor
+    done: torch.Tensor
+    steps: torch.Tensor
+    failed: torch.Tensor
+    label: torch.Tensor
+    noise: torch.Tensor
+    next_noise: torch.Tensor
 
 
 class UpdateTensors(NamedTuple):
@@ -47,6 +66,20 @@ class UpdateTensors(NamedTuple):
     label: torch.Tensor
     noise: torch.Tensor
     next_noise: torch.Tensor
+
+
+def update_tensors(agent: Learner, sampled: SampledTensors) -> UpdateTensors:
+    """The batch as the losses read it: this and the next observations normalised in one pass (row by row
+    alike), flags and step counts as the numbers the losses compute with."""
+    f32 = torch.float32
+    raw = sampled.observations.to(f32)
+    obs, next_obs = agent.normalizer(raw).chunk(2)
+    present, next_present = (None, None) if agent.layout is None else agent.layout.present(raw).chunk(2)
+    return UpdateTensors(
+        obs=obs, present=present, next_obs=next_obs, next_present=next_present, action=sampled.action.to(f32),
+        reward=sampled.reward.to(f32), not_done=1.0 - sampled.done.to(f32), discount=agent.settings.gamma ** sampled.steps.to(f32),
+        failed=sampled.failed.to(f32), label=sampled.label.to(torch.int64), noise=sampled.noise, next_noise=sampled.next_noise,
+    )
 
 
 def sac_losses(agent: Learner, summaries: torch.Tensor, batch: UpdateTensors, labelled: bool) -> tuple[torch.Tensor, torch.Tensor]:

@@ -30,7 +30,7 @@ from torch.fx import Graph, Node
 from torch.fx.experimental.proxy_tensor import make_fx
 
 from lanrocli.agent.encoder import LanguageEncoder, encode, native_reading
-from lanrocli.agent.losses import Learner, UpdateTensors, sac_losses
+from lanrocli.agent.losses import Learner, SampledTensors, sac_losses, update_tensors
 from lanrocli.agent.native import REPLAY, load
 from lanrocli.language import PAD_ID
 
@@ -191,7 +191,8 @@ class _Calls:
 
 class ReplayedGradients:
     """An agent's update up to its optimiser's step, recorded on the first batch of each kind and replayed
-    after: the encoders' reading of the batch's sentences (:func:`~lanrocli.agent.encoder.encode`),
+    after: the batch's tensors as the losses read them (:func:`~lanrocli.agent.losses.update_tensors`), the
+    encoders' reading of its sentences (:func:`~lanrocli.agent.encoder.encode`),
     :func:`~lanrocli.agent.losses.sac_losses`, and the gradients of the losses' sum for the ``learned`` tensors."""
 
     def __init__(
@@ -199,9 +200,13 @@ class ReplayedGradients:
     ) -> None:
         self._native, self._threads = native, threads
         self._agent, self._learned, self._encoders = agent, list(learned), list(encoders)
-        # Everything the update reads of the agent: its networks (encoders included) and the temperature, taken
-        # once: the optimiser and load_state_dict change them in place, as they must for a replay to see it.
-        self._state = [*agent.critic.parameters(), *agent.actor.parameters(), *agent.target_critic.parameters(), agent.log_alpha]
+        # Everything the update reads of the agent: its networks (encoders included), the temperature and the
+        # observations' statistics, taken once: the optimiser, the statistics' updates and load_state_dict change
+        # them in place, as they must for a replay to see it.
+        self._state = [
+            *agent.critic.parameters(), *agent.actor.parameters(), *agent.target_critic.parameters(), agent.log_alpha,
+            agent.normalizer.shift, agent.normalizer.scale,
+        ]
         self._recordings: dict[tuple[Any, ...], tuple[Recording, list[bool]]] = {}
 
     def __deepcopy__(self, memo: dict[int, Any]) -> ReplayedGradients:
@@ -215,30 +220,25 @@ class ReplayedGradients:
         )
         return copied
 
-    def __call__(self, tokens: torch.Tensor, batch: UpdateTensors, labelled: bool) -> tuple[list[torch.Tensor | None], torch.Tensor]:
+    def __call__(self, tokens: torch.Tensor, sampled: SampledTensors, labelled: bool) -> tuple[list[torch.Tensor | None], torch.Tensor]:
         """The gradients for each of ``learned`` (None where it has none), and the update's metrics, of the
-        batch whose sentences and next sentences are ``tokens`` (int64 [2B, L])."""
-        present = [value is not None for value in batch]
-        tensors = [value for value in batch if value is not None]
+        batch ``sampled`` whose sentences and next sentences are ``tokens`` (int64 [2B, L])."""
         # A batch without a word reads as zeros, from which nothing learns: a reading of its own.
         worded = bool(tokens.ne(PAD_ID).any())
         # All the settings, though acting's (act_by) never reach the losses: a recording more is cheap.
-        key = (self._agent.settings, labelled, worded, tuple(present), tokens.shape, *((t.shape, t.dtype) for t in tensors))
+        key = (self._agent.settings, labelled, worded, tokens.shape, *((t.shape, t.dtype) for t in sampled))
         if key not in self._recordings:
-            self._recordings[key] = self._record(present, tokens, tensors, labelled)
+            self._recordings[key] = self._record(tokens, sampled, labelled)
         recording, has_gradient = self._recordings[key]
-        *gradients, metrics = recording([*self._state, tokens, *tensors])
+        *gradients, metrics = recording([*self._state, tokens, *sampled])
         given = iter(gradients)
         return [next(given) if has else None for has in has_gradient], metrics
 
-    def _record(
-        self, present: list[bool], tokens: torch.Tensor, tensors: list[torch.Tensor], labelled: bool
-    ) -> tuple[Recording, list[bool]]:
+    def _record(self, tokens: torch.Tensor, sampled: SampledTensors, labelled: bool) -> tuple[Recording, list[bool]]:
         has_gradient: list[bool] = []
 
         def gradients(*inputs: torch.Tensor) -> list[torch.Tensor]:
-            tokens, given = inputs[len(self._state)], iter(inputs[len(self._state) + 1 :])
-            batch = UpdateTensors(*(next(given) if has else None for has in present))
+            tokens, batch = inputs[len(self._state)], update_tensors(self._agent, SampledTensors(*inputs[len(self._state) + 1 :]))
             summaries = encode(self._encoders, tokens)
             loss, metrics = sac_losses(self._agent, summaries, batch, labelled)
             grads = torch.autograd.grad(loss, self._learned, allow_unused=True)
@@ -246,7 +246,7 @@ class ReplayedGradients:
             return [*(grad for grad in grads if grad is not None), metrics]
 
         try:
-            return Recording(gradients, [*self._state, tokens, *tensors], self._native, self._threads), has_gradient
+            return Recording(gradients, [*self._state, tokens, *sampled], self._native, self._threads), has_gradient
         except RuntimeError as error:  # a branch on a tensor's value, most likely: Python that needs the values
             raise RuntimeError(
                 f"the update could not be recorded for its replay ({error}); sac_losses and the networks must be "

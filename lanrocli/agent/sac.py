@@ -17,7 +17,7 @@ from lanrocli.agent.buffer import ReplayBuffer
 from lanrocli.agent.adam import adam_step
 from lanrocli.agent.encoder import LanguageEncoder, encode
 from lanrocli.agent.noise import restore_generator
-from lanrocli.agent.losses import UpdateTensors, compile_problem, compiled_losses, sac_losses
+from lanrocli.agent.losses import SampledTensors, compile_problem, compiled_losses, sac_losses, update_tensors
 from lanrocli.agent.networks import Actor, Critic, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.replay import ReplayedGradients, replayed_gradients
@@ -174,26 +174,26 @@ class SACAgent:
     def update(self, batch: Batch) -> dict[str, float]:
         """One SAC update of critic, actor and temperature on ``batch`` (:func:`~lanrocli.agent.losses.sac_losses`),
         then of the target critic."""
-        tensors, tokens = self._update_inputs(batch)
-        metrics = self._gradients(tokens, tensors, batch.labelled)
+        sampled, tokens = self._sampled_tensors(batch)
+        metrics = self._gradients(tokens, sampled, batch.labelled)
         self._step()
         return dict(zip(UPDATE_METRICS, metrics.tolist()))
 
-    def _gradients(self, tokens: torch.Tensor, tensors: UpdateTensors, labelled: bool) -> torch.Tensor:
+    def _gradients(self, tokens: torch.Tensor, sampled: SampledTensors, labelled: bool) -> torch.Tensor:
         """Every learned parameter's gradient of the losses' sum, from one backward pass, in its ``grad``; the
         update's metrics. Replayed (:mod:`lanrocli.agent.replay`), they are the recorded operations of this."""
         if self._replay_pending:
             self._replay_pending = False
             self._replay = replayed_gradients(self, self._learned, self._update_encoders(), self.device, self.update_threads)
         if self._replay is not None:
-            gradients, metrics = self._replay(tokens, tensors, labelled)
+            gradients, metrics = self._replay(tokens, sampled, labelled)
             for parameter, gradient in zip(self._learned, gradients):
                 parameter.grad = gradient
             return metrics
         # The critic's, the actor's and the target critic's encoders read this and the next sentences (they
         # nearly always coincide) in one pass.
         summaries = encode(self._update_encoders(), tokens)
-        loss, metrics = self._losses(self, summaries, tensors, labelled)
+        loss, metrics = self._losses(self, summaries, update_tensors(self, sampled), labelled)
         self._backward(loss)
         return metrics
 
@@ -203,23 +203,20 @@ class SACAgent:
             parameter.grad = None
         loss.backward()
 
-    def _update_inputs(self, batch: Batch) -> tuple[UpdateTensors, torch.Tensor]:
-        """The batch as the losses read it, and its sentences followed by its next sentences (int64 [2B, L])."""
-        s = self.settings
-        both, present = self._observe(np.concatenate([batch.obs, batch.next_obs]))  # one pass: row by row alike
-        obs, next_obs = both.chunk(2)
-        present, next_present = (None, None) if present is None else present.chunk(2)
+    def _sampled_tensors(self, batch: Batch) -> tuple[SampledTensors, torch.Tensor]:
+        """The batch as tensors, and its sentences followed by its next sentences (int64 [2B, L])."""
+        def tensor(array: np.ndarray) -> torch.Tensor:
+            return torch.as_tensor(array, device=self.device)
+
         # The policy's noise, the next states' first, from the agent's stream: drawn here, the losses are a
         # function of tensors alone.
-        next_noise, noise = (torch.randn(obs.shape[0], self.action_dim, generator=self.generator, device=self.device) for _ in range(2))
-        tensors = UpdateTensors(
-            obs=obs, present=present, next_obs=next_obs, next_present=next_present,
-            action=self._tensor(batch.action, torch.float32), reward=self._tensor(batch.reward, torch.float32),
-            not_done=1.0 - self._tensor(batch.done, torch.float32), discount=s.gamma ** self._tensor(batch.steps, torch.float32),
-            failed=self._tensor(batch.failed, torch.float32), label=self._tensor(batch.label, torch.int64),
-            noise=noise, next_noise=next_noise,
+        next_noise, noise = (torch.randn(batch.obs.shape[0], self.action_dim, generator=self.generator, device=self.device) for _ in range(2))
+        sampled = SampledTensors(
+            observations=tensor(np.concatenate([batch.obs, batch.next_obs])), action=tensor(batch.action),
+            reward=tensor(batch.reward), done=tensor(batch.done), steps=tensor(batch.steps), failed=tensor(batch.failed),
+            label=tensor(batch.label), noise=noise, next_noise=next_noise,
         )
-        return tensors, self._tensor(np.concatenate([batch.instruction, batch.next_instruction]), torch.int64)
+        return sampled, tensor(np.concatenate([batch.instruction, batch.next_instruction])).to(torch.int64)
 
     def _update_encoders(self) -> list[LanguageEncoder]:
         """The encoders an update reads the sentences with, in the order :func:`sac_losses` takes their
