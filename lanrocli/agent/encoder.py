@@ -35,10 +35,20 @@ class LanguageEncoder(nn.Module):
 
     def forward(self, tokens: torch.Tensor) -> torch.Tensor:
         """``tokens``: int64 [B, L] ids padded with 0. Returns float [B, hidden]."""
+        return self.summarise(*self.distinct(tokens))
+
+    def distinct(self, tokens: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """What :meth:`summarise` reads of ``tokens``: the distinct sentences cut to the longest one's words (at
+        least one), each one's number of words, and per row the index of its distinct sentence. Their shapes
+        depend on the words, so this part is Python's: :meth:`summarise` is a function of tensors alone."""
         sentences, inverse = _distinct(tokens, self.vocab_size)
         lengths = (sentences != PAD_ID).sum(dim=1)
-        states, _ = self.gru(self.embedding(sentences[:, : max(int(lengths.max()), 1)]))
-        summary = states[torch.arange(sentences.shape[0], device=tokens.device), (lengths - 1).clamp(min=0)]
+        return sentences[:, : max(int(lengths.max()), 1)], lengths, inverse
+
+    def summarise(self, sentences: torch.Tensor, lengths: torch.Tensor, inverse: torch.Tensor) -> torch.Tensor:
+        """The summaries [B, hidden] of the rows :meth:`distinct` read."""
+        states, _ = self.gru(self.embedding(sentences))
+        summary = states[torch.arange(sentences.shape[0], device=sentences.device), (lengths - 1).clamp(min=0)]
         # An empty sentence has read no word: its summary is the GRU's initial state, zero.
         return (summary * (lengths > 0).unsqueeze(1).to(summary.dtype))[inverse]
 

@@ -29,12 +29,14 @@ import torch
 from torch.fx import Graph, Node
 from torch.fx.experimental.proxy_tensor import make_fx
 
+from lanrocli.agent.acting import Acting
 from lanrocli.agent.encoder import LanguageEncoder, encode, native_reading
 from lanrocli.agent.losses import Learner, SampledTensors, sac_losses, update_tensors
 from lanrocli.agent.native import REPLAY, load
 from lanrocli.language import PAD_ID
 
 TIMED_RUNS = 4  # runs of a recording timed one call at a time, the fastest of each call's times kept
+ACTING_RECORDED_AFTER = 200  # calls of one kind and shape from Python before acting records it (ReplayedActing)
 
 
 class Recording:
@@ -189,7 +191,24 @@ class _Calls:
         return sorted(range(len(costs)), key=lambda index: (-remaining[index], index)), [sorted(a) for a in after]
 
 
-class ReplayedGradients:
+class _AgentReplay:
+    """Recordings of functions of one agent's tensors (``_state``, taken once: the optimiser, the observations'
+    statistics and ``load_state_dict`` change them in place, as they must for a replay to see it)."""
+
+    _state: list[torch.Tensor]
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> _AgentReplay:
+        """A copy of the agent gets a replay of its own, which records anew: a recording holds the tensors of
+        the agent it was made for. Its agent and tensors are the copy's, through the memo (they may not be whole
+        yet: no attribute of theirs is read here); the rest is shared."""
+        copied = type(self).__new__(type(self))
+        for name, value in vars(self).items():
+            setattr(copied, name, copy.deepcopy(value, memo) if name in ("_agent", "_learned", "_encoders", "_state") else value)
+        copied.__dict__.update({name: {} for name in ("_recordings", "_calls") if name in vars(self)})  # its own
+        return copied
+
+
+class ReplayedGradients(_AgentReplay):
     """An agent's update up to its optimiser's step, recorded on the first batch of each kind and replayed
     after: the batch's tensors as the losses read them (:func:`~lanrocli.agent.losses.update_tensors`), the
     encoders' reading of its sentences (:func:`~lanrocli.agent.encoder.encode`),
@@ -201,24 +220,12 @@ class ReplayedGradients:
         self._native, self._threads = native, threads
         self._agent, self._learned, self._encoders = agent, list(learned), list(encoders)
         # Everything the update reads of the agent: its networks (encoders included), the temperature and the
-        # observations' statistics, taken once: the optimiser, the statistics' updates and load_state_dict change
-        # them in place, as they must for a replay to see it.
+        # observations' statistics.
         self._state = [
             *agent.critic.parameters(), *agent.actor.parameters(), *agent.target_critic.parameters(), agent.log_alpha,
             agent.normalizer.shift, agent.normalizer.scale,
         ]
         self._recordings: dict[tuple[Any, ...], tuple[Recording, list[bool]]] = {}
-
-    def __deepcopy__(self, memo: dict[int, Any]) -> ReplayedGradients:
-        """A copy of the agent gets a replay of its own, which records anew: a recording holds the tensors of
-        the agent it was made for."""
-        copied = ReplayedGradients.__new__(ReplayedGradients)
-        copied._native, copied._threads, copied._recordings = self._native, self._threads, {}
-        # Through the memo, to the copy's own tensors (which may not be whole yet: no attribute is read here).
-        copied._agent, copied._learned, copied._encoders, copied._state = (
-            copy.deepcopy(x, memo) for x in (self._agent, self._learned, self._encoders, self._state)
-        )
-        return copied
 
     def __call__(self, tokens: torch.Tensor, sampled: SampledTensors, labelled: bool) -> tuple[list[torch.Tensor | None], torch.Tensor]:
         """The gradients for each of ``learned`` (None where it has none), and the update's metrics, of the
@@ -252,6 +259,38 @@ class ReplayedGradients:
                 f"the update could not be recorded for its replay ({error}); sac_losses and the networks must be "
                 "functions of tensors without branches on their values, or set agent.replay: false to update from Python"
             ) from error
+
+
+class ReplayedActing(_AgentReplay):
+    """An agent's acting (:mod:`lanrocli.agent.acting`), run from Python until one kind and shape of call has been
+    made ``after`` times, then recorded and replayed: shapes come and go with the sentences' lengths, and a
+    recording costs what a few hundred calls from Python do, so only those that recur are recorded. Acting on
+    CPU only, like the update, and the C++ built or loaded at the first recording."""
+
+    def __init__(self, agent: Acting, after: int = ACTING_RECORDED_AFTER) -> None:
+        self._agent, self._after, self._native = agent, after, None
+        self._state = list(dict.fromkeys([
+            *agent.actor.parameters(), *agent.actor_encoder.parameters(), agent.normalizer.shift, agent.normalizer.scale,
+        ]))
+        self._calls: dict[tuple[Any, ...], int] = {}
+        self._recordings: dict[tuple[Any, ...], Recording] = {}
+
+    def __call__(self, function: Callable[..., list[torch.Tensor]], inputs: list[torch.Tensor]) -> list[torch.Tensor]:
+        """``function(agent, *inputs)``, replayed where recorded."""
+        key = (function, self._agent.settings, *((t.shape, t.dtype) for t in inputs))
+        recording = self._recordings.get(key)
+        if recording is None:
+            self._calls[key] = calls = self._calls.get(key, 0) + 1
+            if calls < self._after or self._load() is None:
+                return function(self._agent, *inputs)
+            state = len(self._state)
+            recording = self._recordings[key] = Recording(lambda *given: function(self._agent, *given[state:]), [*self._state, *inputs], self._native)
+        return recording([*self._state, *inputs])
+
+    def _load(self) -> Any:
+        if self._native is None:
+            self._native = load(REPLAY) or False  # False: it cannot be built here (warned once)
+        return self._native or None
 
 
 def update_threads(workers: int) -> int:

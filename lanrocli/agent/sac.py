@@ -6,7 +6,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -20,7 +20,8 @@ from lanrocli.agent.noise import restore_generator
 from lanrocli.agent.losses import SampledTensors, compile_problem, compiled_losses, sac_losses, update_tensors
 from lanrocli.agent.networks import Actor, Critic, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
-from lanrocli.agent.replay import ReplayedGradients, replayed_gradients
+from lanrocli.agent.acting import exploit, explore
+from lanrocli.agent.replay import ReplayedActing, ReplayedGradients, replayed_gradients
 from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
 from lanrocli.agent.transitions import Batch
 from lanrocli.choices import ActingAttention
@@ -29,12 +30,6 @@ _FORMAT = 1
 
 POLICY_ONLY_DROPS = ("optimizer", "target_critic", "generator", "generator_device")
 """What :meth:`SACAgent.policy_state_dict` leaves out of the agent's state."""
-
-
-def _argmax_scores(scores: torch.Tensor) -> torch.Tensor:
-    """Attention logits whose softmax is one on each row's highest score and zero elsewhere."""
-    lowest = torch.full_like(scores, torch.finfo(scores.dtype).min)
-    return lowest.scatter(-1, scores.argmax(dim=-1, keepdim=True), 0.0)
 
 
 class SACAgent:
@@ -108,6 +103,7 @@ class SACAgent:
         self._replay: ReplayedGradients | None = None
         self.update_threads = 1  # the replay's (a training's: replay.update_threads); the same numbers for any
         self._replay_pending = s.replay and not s.compile  # made at the first update, when its C++ is built
+        self._acting = ReplayedActing(self) if s.replay and not s.compile and self.device.type == "cpu" else None
 
     def _learning_rates(self) -> list[float]:
         """Per parameter group of the optimiser: critic, actor, then the temperature when it is tuned."""
@@ -124,16 +120,14 @@ class SACAgent:
     def _tensor(self, array: np.ndarray, dtype: torch.dtype) -> torch.Tensor:
         return torch.as_tensor(np.asarray(array), device=self.device).to(dtype)
 
-    def _observe(self, observations: np.ndarray) -> tuple[torch.Tensor, torch.Tensor | None]:
-        """Normalised observations [B, N] and, for an object-wise agent, which slots hold objects."""
-        raw = self._tensor(observations, torch.float32).reshape(-1, self.obs_dim)
-        return self.normalizer(raw), None if self.layout is None else self.layout.present(raw)
+    def _acting_inputs(self, obs: Mapping[str, np.ndarray]) -> list[torch.Tensor]:
+        """The raw observations [B, N] and the actor's sentences as :meth:`LanguageEncoder.distinct` reads them."""
+        raw = self._tensor(np.asarray(obs["observation"]), torch.float32).reshape(-1, self.obs_dim)
+        return [raw, *self.actor_encoder.distinct(self._tensor(obs["instruction"], torch.int64).reshape(raw.shape[0], -1))]
 
-    def _read(self, obs: Mapping[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
-        """Normalised observations, the slots that hold objects, and the actor's summary of the sentences."""
-        x, present = self._observe(np.asarray(obs["observation"]))
-        tokens = self._tensor(obs["instruction"], torch.int64).reshape(x.shape[0], -1)
-        return x, present, self.actor_encoder(tokens)
+    def _act(self, function: Callable[..., list[torch.Tensor]], inputs: list[torch.Tensor]) -> list[torch.Tensor]:
+        """``function`` (of :mod:`lanrocli.agent.acting`) of this agent and ``inputs``: replayed where the update is."""
+        return function(self, *inputs) if self._acting is None else self._acting(function, inputs)
 
     @torch.no_grad()
     def act(self, obs: Mapping[str, np.ndarray], deterministic: bool = False) -> np.ndarray:
@@ -143,8 +137,9 @@ class SACAgent:
         if deterministic:
             out = self.act_and_attend(obs)[0]
         else:
-            x, present, language = self._read(obs)
-            out = self.actor.sample(x, language, self.generator, present)[0].cpu().numpy()
+            inputs = self._acting_inputs(obs)
+            noise = torch.randn(inputs[0].shape[0], self.action_dim, generator=self.generator, device=self.device)
+            out = self._act(explore, [*inputs, noise])[0].cpu().numpy()
         return out[0] if observation.ndim == 1 else out
 
     @torch.no_grad()
@@ -152,13 +147,8 @@ class SACAgent:
         """For a batch as :meth:`act` takes it: the deterministic actions [B, A] and the actor's attention
         over the object slots [B, slots], summing to 1 over the present objects (None for a flat agent),
         both from one reading of the sentences and the objects."""
-        x, present, language = self._read(obs)
-        if self.actor.reader is None:
-            return self.actor.mode(x, language, present).cpu().numpy(), None
-        scores = self.actor.reader.scores(x, language, present)
-        acting = scores if self.settings.acting_attention == ActingAttention.SOFT else _argmax_scores(scores)
-        mean, _ = self.actor(x, language, present, acting)
-        return torch.tanh(mean).cpu().numpy(), scores[0].softmax(dim=-1).cpu().numpy()
+        actions, *attention = self._act(exploit, self._acting_inputs(obs))
+        return actions.cpu().numpy(), attention[0].cpu().numpy() if attention else None
 
     def act_by(self, attention: ActingAttention) -> None:
         """Read the scene by ``attention`` in deterministic actions from now on (``SACSettings.acting_attention``);

@@ -11,6 +11,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
+from lanrocli.agent.acting import observed
 from lanrocli.agent.buffer import ReplayBuffer
 from lanrocli.agent.transitions import Batch
 from lanrocli.agent.networks import ObjectLayout
@@ -86,7 +87,7 @@ def _grounding_batch(rng: np.random.Generator, size: int = 128) -> Batch:
 
 def _attention_on_named(agent: SACAgent, batch: Batch) -> list[float]:
     """Mean attention weight on the named object, for the actor's reader and each critic's."""
-    obs, present = agent._observe(batch.obs)
+    obs, present = observed(agent, torch.as_tensor(batch.obs))
     tokens = torch.as_tensor(batch.instruction)
     named = torch.as_tensor(batch.named)
     weights = []
@@ -219,8 +220,8 @@ def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
     agent.update(batch)
 
     r = reference
-    obs, present = r._observe(batch.obs)
-    next_obs, next_present = r._observe(batch.next_obs)
+    obs, present = observed(r, torch.as_tensor(batch.obs))
+    next_obs, next_present = observed(r, torch.as_tensor(batch.next_obs))
     tokens, next_tokens = torch.as_tensor(batch.instruction), torch.as_tensor(batch.next_instruction)
     alpha = r.log_alpha.exp()
     with torch.no_grad():  # the exploration noise is drawn in the update's order: next actions first
