@@ -21,8 +21,8 @@ class LanguageEncoder(nn.Module):
     never read as words and the summary does not depend on the padded length. Padding is assumed to follow
     the words, as :meth:`Vocabulary.encode` puts it.
 
-    Acting reads a few sentences at a time with the ``nn.GRU`` module, one fused call; an update reads a
-    batch's sentences with :func:`encode`, which steps the encoders of several networks together and is
+    Acting reads a few sentences at a time with the ``nn.GRU`` module (:meth:`summarise`; a replayed act
+    calls the operations that module calls); an update reads a batch's sentences with :func:`encode`, which steps the encoders of several networks together and is
     tested to give the same summaries and gradients (see :mod:`lanrocli.agent.gru`).
     """
 

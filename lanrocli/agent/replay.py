@@ -252,13 +252,7 @@ class ReplayedGradients(_AgentReplay):
             has_gradient[:] = [grad is not None for grad in grads]
             return [*(grad for grad in grads if grad is not None), metrics]
 
-        try:
-            return Recording(gradients, [*self._state, tokens, *sampled], self._native, self._threads), has_gradient
-        except RuntimeError as error:  # a branch on a tensor's value, most likely: Python that needs the values
-            raise RuntimeError(
-                f"the update could not be recorded for its replay ({error}); sac_losses and the networks must be "
-                "functions of tensors without branches on their values, or set agent.replay: false to update from Python"
-            ) from error
+        return _recorded("update", gradients, [*self._state, tokens, *sampled], self._native, self._threads), has_gradient
 
 
 class ReplayedActing(_AgentReplay):
@@ -284,13 +278,28 @@ class ReplayedActing(_AgentReplay):
             if calls < self._after or self._load() is None:
                 return function(self._agent, *inputs)
             state = len(self._state)
-            recording = self._recordings[key] = Recording(lambda *given: function(self._agent, *given[state:]), [*self._state, *inputs], self._native)
+            recording = self._recordings[key] = _recorded(
+                f"acting ({function.__name__})", lambda *given: function(self._agent, *given[state:]), [*self._state, *inputs], self._native)
         return recording([*self._state, *inputs])
 
     def _load(self) -> Any:
         if self._native is None:
             self._native = load(REPLAY) or False  # False: it cannot be built here (warned once)
         return self._native or None
+
+
+def _recorded(
+    what: str, function: Callable[..., Sequence[torch.Tensor]], inputs: Sequence[torch.Tensor], native: Any, threads: int = 1
+) -> Recording:
+    """A recording of the agent's ``what``, or an error that says what it needs and how to do without."""
+    try:
+        return Recording(function, inputs, native, threads)
+    except RuntimeError as error:  # a branch on a tensor's value, most likely: Python that needs the values
+        raise RuntimeError(
+            f"the agent's {what} could not be recorded for its replay ({error}); the "
+            "networks, sac_losses and acting (lanrocli/agent/acting.py) must be functions of tensors without branches on "
+            "their values, or set agent.replay: false to run them from Python"
+        ) from error
 
 
 def update_threads(workers: int) -> int:

@@ -126,7 +126,8 @@ class SACAgent:
         return [raw, *self.actor_encoder.distinct(self._tensor(obs["instruction"], torch.int64).reshape(raw.shape[0], -1))]
 
     def _act(self, function: Callable[..., list[torch.Tensor]], inputs: list[torch.Tensor]) -> list[torch.Tensor]:
-        """``function`` (of :mod:`lanrocli.agent.acting`) of this agent and ``inputs``: replayed where the update is."""
+        """``function`` (of :mod:`lanrocli.agent.acting`) of this agent and ``inputs``; replayed, on CPU where the
+        agent replays (``SACSettings.replay``), once its kind and shape of call recurs."""
         return function(self, *inputs) if self._acting is None else self._acting(function, inputs)
 
     @torch.no_grad()

@@ -7,7 +7,10 @@ import copy
 
 import numpy as np
 import pytest
+import torch
 
+from lanrocli.agent import replay, sac
+from lanrocli.agent.acting import explore
 from lanrocli.agent.replay import ReplayedActing
 from lanrocli.agent.sac import SACAgent
 from lanrocli.choices import ActingAttention
@@ -68,3 +71,26 @@ def test_acting_is_recorded_only_once_a_shape_recurs() -> None:
     assert not agent._acting._recordings
     agent.act(obs)
     assert len(agent._acting._recordings) == 1
+
+
+def test_a_machine_that_cannot_build_the_replay_acts_from_python(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(replay, "load", lambda library: None)  # as native.load answers after its warning
+    agent, python = _agent(seed=1), _agent(seed=1, replay=False)
+    assert agent._acting is not None
+    agent._acting._after = 1
+    for obs in (_observations(np.random.default_rng(k), 2) for k in range(3)):
+        assert np.array_equal(agent.act(obs), python.act(obs))
+    assert not agent._acting._recordings
+
+
+def test_acting_that_branches_on_a_value_fails_to_record_and_says_how_to_act_from_python(monkeypatch: pytest.MonkeyPatch) -> None:
+    def branching(agent: SACAgent, raw: torch.Tensor, *rest: torch.Tensor) -> list[torch.Tensor]:
+        actions = explore(agent, raw, *rest)
+        return actions if raw.sum() > 0 else [-action for action in actions]
+
+    monkeypatch.setattr(sac, "explore", branching)
+    agent = _agent(seed=1)
+    assert agent._acting is not None
+    agent._acting._after = 1
+    with pytest.raises(RuntimeError, match=r"acting \(branching\) could not be recorded .*agent.replay: false"):
+        agent.act(_observations(np.random.default_rng(0), 2))
