@@ -196,15 +196,16 @@ class _AgentReplay:
     statistics and ``load_state_dict`` change them in place, as they must for a replay to see it)."""
 
     _state: list[torch.Tensor]
+    _of_the_agent: tuple[str, ...] = ("_agent", "_state")  # attributes that are the agent's, or hold its tensors
+    _its_own: tuple[str, ...] = ("_recordings",)  # dictionaries a copy starts empty
 
     def __deepcopy__(self, memo: dict[int, Any]) -> _AgentReplay:
         """A copy of the agent gets a replay of its own, which records anew: a recording holds the tensors of
-        the agent it was made for. Its agent and tensors are the copy's, through the memo (they may not be whole
-        yet: no attribute of theirs is read here); the rest is shared."""
+        the agent it was made for. What is the agent's is the copy's, through the memo (it may not be whole yet:
+        no attribute of it is read here); the rest is shared."""
         copied = type(self).__new__(type(self))
         for name, value in vars(self).items():
-            setattr(copied, name, copy.deepcopy(value, memo) if name in ("_agent", "_learned", "_encoders", "_state") else value)
-        copied.__dict__.update({name: {} for name in ("_recordings", "_calls") if name in vars(self)})  # its own
+            setattr(copied, name, {} if name in self._its_own else copy.deepcopy(value, memo) if name in self._of_the_agent else value)
         return copied
 
 
@@ -213,6 +214,8 @@ class ReplayedGradients(_AgentReplay):
     after: the batch's tensors as the losses read them (:func:`~lanrocli.agent.losses.update_tensors`), the
     encoders' reading of its sentences (:func:`~lanrocli.agent.encoder.encode`),
     :func:`~lanrocli.agent.losses.sac_losses`, and the gradients of the losses' sum for the ``learned`` tensors."""
+
+    _of_the_agent = ("_agent", "_state", "_learned", "_encoders")
 
     def __init__(
         self, native: Any, agent: Learner, learned: Sequence[torch.Tensor], encoders: Sequence[LanguageEncoder], threads: int = 1
@@ -260,6 +263,8 @@ class ReplayedActing(_AgentReplay):
     made ``after`` times, then recorded and replayed: shapes come and go with the sentences' lengths, and a
     recording costs what a few hundred calls from Python do, so only those that recur are recorded. Acting on
     CPU only, like the update, and the C++ built or loaded at the first recording."""
+
+    _its_own = ("_recordings", "_calls")
 
     def __init__(self, agent: Acting, after: int = ACTING_RECORDED_AFTER) -> None:
         self._agent, self._after, self._native = agent, after, None

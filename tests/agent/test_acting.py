@@ -55,7 +55,8 @@ def test_replayed_acting_answers_as_acting_from_python_does(settings: dict[str, 
     assert recorded and recorded == {key for key, calls in acting._calls.items() if calls >= 2}
 
     copied: SACAgent = copy.deepcopy(replayed)  # records anew, for its own tensors
-    assert copied._acting is not None and not copied._acting._recordings and acting._recordings == {k: acting._recordings[k] for k in recorded}
+    assert copied._acting is not None and not copied._acting._recordings and not copied._acting._calls
+    assert set(acting._recordings) == recorded  # the original keeps its own
     copied._acting._after = 1
     obs = _observations(rng, 2)
     assert np.array_equal(copied.act(obs, deterministic=True), python.act(obs, deterministic=True))
