@@ -14,7 +14,7 @@ import torch
 from torch import nn
 
 from lanrocli.agent.buffer import ReplayBuffer
-from lanrocli.agent.adam import adam_step
+from lanrocli.agent.adam import AdamStep
 from lanrocli.agent.encoder import LanguageEncoder, encode
 from lanrocli.agent.noise import restore_generator
 from lanrocli.agent.losses import SampledTensors, compile_problem, compiled_losses, sac_losses, update_tensors
@@ -91,6 +91,7 @@ class SACAgent:
             learners.append([self.log_alpha])
         groups = [{"params": params, "lr": lr} for params, lr in zip(learners, self._learning_rates())]
         self.optimizer = torch.optim.Adam(groups, fused=True)
+        self._adam_step = AdamStep(self.optimizer)
         self._learned = [p for params in learners for p in params]
         self._polyak_pairs = (list(self.target_critic.parameters()), list(self.critic.parameters()))
         self.generator = torch.Generator(device=self.device)
@@ -221,7 +222,7 @@ class SACAgent:
             nn.utils.clip_grad_norm_(self.critic.parameters(), s.max_grad_norm)
             nn.utils.clip_grad_norm_(self.actor.parameters(), s.max_grad_norm)
         with torch.no_grad():
-            adam_step(self.optimizer)
+            self._adam_step()
             torch._foreach_lerp_(*self._polyak_pairs, 1.0 - s.polyak)
         self.updates += 1
 
