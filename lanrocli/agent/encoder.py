@@ -22,8 +22,9 @@ class LanguageEncoder(nn.Module):
     the words, as :meth:`Vocabulary.encode` puts it.
 
     Acting reads a few sentences at a time with the ``nn.GRU`` module (:meth:`summarise`; a replayed act
-    calls the operations that module calls); an update reads a batch's sentences with :func:`encode`, which steps the encoders of several networks together and is
-    tested to give the same summaries and gradients (see :mod:`lanrocli.agent.gru`).
+    calls the operations that module calls); an update reads a batch's sentences with :func:`encode`, which
+    steps the encoders of several networks together and is tested to give the same summaries and gradients
+    (see :mod:`lanrocli.agent.gru`).
     """
 
     def __init__(self, vocab_size: int, embedding_size: int, hidden_size: int) -> None:

@@ -123,7 +123,7 @@ class SACAgent:
 
     def _acting_inputs(self, obs: Mapping[str, np.ndarray]) -> list[torch.Tensor]:
         """The raw observations [B, N] and the actor's sentences as :meth:`LanguageEncoder.distinct` reads them."""
-        raw = self._tensor(np.asarray(obs["observation"]), torch.float32).reshape(-1, self.obs_dim)
+        raw = self._tensor(obs["observation"], torch.float32).reshape(-1, self.obs_dim)
         return [raw, *self.actor_encoder.distinct(self._tensor(obs["instruction"], torch.int64).reshape(raw.shape[0], -1))]
 
     def _act(self, function: Callable[..., list[torch.Tensor]], inputs: list[torch.Tensor]) -> list[torch.Tensor]:
