@@ -47,13 +47,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lanrocli.choices import ActingAttention, CorrectionForm
+from lanrocli.core.choices import ActingAttention, CorrectionForm
 from lanrocli.envs.env import LanroEnv
 from lanrocli.language.properties import ObjectProps
 from lanrocli.tasks.reach import REACH_STILL
 from lanrocli.tasks.registry import task_class
-from lanrocli.train.agent_policy import AgentPolicy
-from lanrocli.train.pretrained import agent_path
+from lanrocli.agent.policy import AgentPolicy
+from lanrocli.pretrained import agent_path
 from lanrocli.train.testset import CORRECTION_TEST_NEGATION_RATE
 from lanrocli.train.trainer import load_policy
 

@@ -37,7 +37,7 @@ from lanrocli.agent.encoder import encode, stacked_gates
 from lanrocli.agent.losses import UpdateTensors, sac_losses, update_tensors
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import UPDATE_METRICS
-from lanrocli.agent.transitions import Batch
+from lanrocli.agent.buffer.transitions import Batch
 from lanrocli.language import PAD_ID
 
 

@@ -21,10 +21,10 @@ from pathlib import Path
 import torch
 
 from lanrocli.envs.env import LanroEnv
-from lanrocli.envs.evaluation import SIDE_BY_SIDE, EvaluationReport, evaluate
+from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.envs.workers import make_envs
-from lanrocli.train.pretrained import agent_path
-from lanrocli.train.seeds import held_out_seed
+from lanrocli.pretrained import agent_path
+from lanrocli.core.seeds import held_out_seed
 from lanrocli.train.trainer import load_policy
 
 

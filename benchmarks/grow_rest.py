@@ -24,7 +24,7 @@ import yaml
 
 from lanrocli.agent.sac import SACAgent
 from lanrocli.train.checkpoint import load_checkpoint, save_checkpoint
-from lanrocli.train.curriculum import load_curriculum
+from lanrocli.config.curriculum import load_curriculum
 from lanrocli.train.runfolder import CONFIG, LAST, METRICS, read_pointer, stage_folder
 
 GROWN = ("obs_layer.weight", "actor", 1), ("obs_layer.weight", "critic", 1), ("obs_layer.weight", "target_critic", 1)

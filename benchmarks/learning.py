@@ -22,8 +22,8 @@ from typing import Any
 import torch
 
 from lanrocli.agent.settings import SACSettings
-from lanrocli.display import StopRequest
-from lanrocli.train.curriculum import Curriculum
+from lanrocli.cli.display.training import StopRequest
+from lanrocli.config.curriculum import Curriculum
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
 from lanrocli.train.trainer import pick_device
 

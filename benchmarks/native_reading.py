@@ -21,7 +21,7 @@ from lanrocli.agent import encoder
 from lanrocli.agent.encoder import encode
 from lanrocli.agent.native import Reader, native_reader
 from lanrocli.agent.sac import SACAgent
-from lanrocli.agent.transitions import Batch
+from lanrocli.agent.buffer.transitions import Batch
 
 
 def read_all(agent: SACAgent, batches: list[Batch]) -> Callable[[], None]:

@@ -28,14 +28,14 @@ import numpy as np
 import torch
 from pydantic import ValidationError
 
-from lanrocli.agent.buffer import ReplayBuffer
-from lanrocli.agent.transitions import EpisodeData
+from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
+from lanrocli.agent.buffer.transitions import EpisodeData
 from lanrocli.agent.networks import ObjectLayout
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE
 from lanrocli.language import COLOURS, SHAPES, ObjectProps, grammar_vocabulary
-from lanrocli.train.sections import AgentConfig
+from lanrocli.config.sections import AgentConfig
 
 from learning import AGENT, agent_overrides  # this directory's learning benchmark: same agent, same --agent parsing
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 
 from lanrocli.agent.sac import SACAgent
-from lanrocli.agent.transitions import Batch
+from lanrocli.agent.buffer.transitions import Batch
 
 
 def batch_arguments(parser: argparse.ArgumentParser, stage: int, updates: int) -> None:
@@ -21,7 +21,7 @@ def batch_arguments(parser: argparse.ArgumentParser, stage: int, updates: int) -
 def record_batches(args: argparse.Namespace, parser: argparse.ArgumentParser) -> tuple[SACAgent, list[Batch]]:
     """The curriculum's agent after ``--collect`` steps of its stage ``--stage``, untrained, and ``--updates``
     batches sampled from what it collected, as that stage samples them."""
-    from lanrocli.train.curriculum import find_curriculum, load_curriculum
+    from lanrocli.config.curriculum import find_curriculum, load_curriculum
     from lanrocli.train.trainer import Trainer, TrainSettings
 
     curriculum = load_curriculum(find_curriculum(args.curriculum))

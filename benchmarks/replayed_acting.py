@@ -19,7 +19,7 @@ import torch
 from recorded_batches import twin
 
 from lanrocli.agent.sac import SACAgent
-from lanrocli.train.curriculum import find_curriculum, load_curriculum
+from lanrocli.config.curriculum import find_curriculum, load_curriculum
 from lanrocli.train.trainer import Trainer, TrainSettings
 
 Observation = dict[str, np.ndarray]

@@ -21,7 +21,7 @@ import statistics
 import torch
 
 from lanrocli.agent.settings import BufferSettings, SACSettings
-from lanrocli.train.curriculum import find_curriculum, load_curriculum
+from lanrocli.config.curriculum import find_curriculum, load_curriculum
 from train_throughput import run_ours
 
 

@@ -23,12 +23,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from lanrocli.train.curriculum import builtin_curriculum, load_curriculum
+from lanrocli.config.curriculum import builtin_curriculum, load_curriculum
 
 
 def timed(args: list[str], cwd: Path) -> float:
     start = time.perf_counter()
-    result = subprocess.run([sys.executable, "-c", "from lanrocli.cli import app; app()", *args], cwd=cwd,
+    result = subprocess.run([sys.executable, "-c", "from lanrocli.cli.app import app; app()", *args], cwd=cwd,
                             capture_output=True, text=True)
     seconds = time.perf_counter() - start
     if result.returncode != 0:

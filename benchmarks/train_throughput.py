@@ -34,7 +34,7 @@ from lanrocli.agent import replay
 from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.settings import EnvSettings
-from lanrocli.train.curriculum import find_curriculum, load_curriculum
+from lanrocli.config.curriculum import find_curriculum, load_curriculum
 from lanrocli.train.trainer import Trainer, TrainSettings
 
 

@@ -32,7 +32,7 @@ from recorded_batches import batch_arguments, record_batches, twin
 from lanrocli.agent import encoder
 from lanrocli.agent.losses import update_tensors
 from lanrocli.agent.sac import SACAgent
-from lanrocli.agent.transitions import Batch
+from lanrocli.agent.buffer.transitions import Batch
 
 def time_parts(agent: SACAgent, batches: list[Batch]) -> dict[str, float]:
     """ms per update in each part of :meth:`SACAgent.update`, whose steps this makes one by one."""

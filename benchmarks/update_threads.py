@@ -15,7 +15,7 @@ import statistics
 import torch
 from train_throughput import run_ours
 
-from lanrocli.train.curriculum import find_curriculum, load_curriculum
+from lanrocli.config.curriculum import find_curriculum, load_curriculum
 
 
 def main() -> None:

@@ -2,7 +2,7 @@
 
 from importlib.metadata import PackageNotFoundError, version
 
-from lanrocli.registration import register_envs
+from lanrocli.envs.registration import register_envs
 
 try:
     __version__ = version("lanro")

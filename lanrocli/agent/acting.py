@@ -15,7 +15,7 @@ from lanrocli.agent.encoder import LanguageEncoder
 from lanrocli.agent.networks import Actor, ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.settings import SACSettings
-from lanrocli.choices import ActingAttention
+from lanrocli.core.choices import ActingAttention
 
 
 class Acting(Protocol):

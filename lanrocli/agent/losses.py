@@ -16,7 +16,7 @@ import torch
 from lanrocli.agent.networks import Actor, Critic, ObjectLayout, attention_loss
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.settings import SACSettings
-from lanrocli.reward import FAILURE_REWARD, SUCCESS_REWARD
+from lanrocli.core.reward import FAILURE_REWARD, SUCCESS_REWARD
 
 
 class Learner(Protocol):

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from lanrocli.agent.buffer import ReplayBuffer
+from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
 from lanrocli.agent.adam import AdamStep
 from lanrocli.agent.encoder import LanguageEncoder, encode
 from lanrocli.agent.noise import restore_generator
@@ -23,8 +23,8 @@ from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.acting import exploit, explore
 from lanrocli.agent.replay import ReplayedActing, ReplayedGradients, replayed_gradients
 from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
-from lanrocli.agent.transitions import Batch
-from lanrocli.choices import ActingAttention
+from lanrocli.agent.buffer.transitions import Batch
+from lanrocli.core.choices import ActingAttention
 
 _FORMAT = 1
 

@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
 
-from lanrocli.choices import ActingAttention
+from lanrocli.core.choices import ActingAttention
 
 UPDATE_METRICS = ("critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy")
 """The figures each update of the agent reports, in its order; ``metrics.csv`` has a column for each."""

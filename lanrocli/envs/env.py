@@ -7,14 +7,14 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from lanrocli.choices import Kind, Split
+from lanrocli.core.choices import Kind, Split
 from lanrocli.envs.instructor import Instructor
 from lanrocli.envs.scene import Scene, check_scenes, sample_scene
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.starts import place_arm
 from lanrocli.language import COLOURS, SHAPES, Vocabulary, grammar_vocabulary, max_sentence_words
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
-from lanrocli.reward import reward
+from lanrocli.core.reward import reward
 from lanrocli.sim import (
     MAX_STEP,
     OBJECT_AREA,

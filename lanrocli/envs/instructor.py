@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lanrocli.choices import CorrectionForm, Kind, Split
+from lanrocli.core.choices import CorrectionForm, Kind, Split
 from lanrocli.language import (
     BEGINNING_WORDS,
     NAMING_FORMS,

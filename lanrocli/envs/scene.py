@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lanrocli.choices import Mode, Split
+from lanrocli.core.choices import Mode, Split
 from lanrocli.language import COLOURS, SHAPES, ObjectProps
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 

@@ -12,7 +12,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-from lanrocli.choices import Kind, Mode
+from lanrocli.core.choices import Kind, Mode
 from lanrocli.envs.instructor import InstructorSettings
 from lanrocli.tasks import TASKS, task_class
 

@@ -3,7 +3,7 @@
 Measuring an agent is mostly simulation: the policy answers the episodes side by side in one batch, but
 each episode's physics is one core's work. An :class:`EnvWorker` steps its environment in a subprocess, so
 the episodes of one batch simulate on as many cores as the machine has. It answers the calls
-:mod:`lanrocli.envs.rollout` makes of an environment (``reset``, ``step``, ``render``) with the values the
+:mod:`lanrocli.evaluation.rollout` makes of an environment (``reset``, ``step``, ``render``) with the values the
 environment itself returns, and adds ``step_async`` / ``step_wait`` so the rollout can set every episode
 stepping before it waits for the first. PyBullet is deterministic, so an episode played in a worker is the
 one played in this process, step for step.

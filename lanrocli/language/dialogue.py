@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from lanrocli.choices import Kind
+from lanrocli.core.choices import Kind
 from lanrocli.language.grammar import Phrase, ambiguous_phrases, identifying_phrases, object_phrases
 from lanrocli.language.properties import ObjectProps
 

@@ -22,7 +22,7 @@ from enum import Enum
 
 import numpy as np
 
-from lanrocli.choices import CorrectionForm
+from lanrocli.core.choices import CorrectionForm
 from lanrocli.language.properties import (
     COLOURS,
     RARE_COLOUR_WORDS,

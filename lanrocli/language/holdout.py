@@ -11,7 +11,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from lanrocli.choices import Split
+from lanrocli.core.choices import Split
 from lanrocli.language.grammar import Phrase
 from lanrocli.language.properties import (
     COLOURS,

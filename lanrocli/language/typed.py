@@ -11,7 +11,7 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-from lanrocli.choices import CorrectionForm
+from lanrocli.core.choices import CorrectionForm
 from lanrocli.language.grammar import BEGINNING_WORDS, all_corrections, all_instructions, extend
 from lanrocli.language.properties import COLOURS, RARE_WORD_COLOURS, WORD_SHAPES, ObjectProps
 from lanrocli.language.vocabulary import Vocabulary

@@ -1,7 +1,7 @@
 """A sweep's definition and its folder: the curriculum, the seeds, the settings changed for every trial and
 the grid, the trials they make, and ``sweep.yaml``, which records them.
 
-Settings are read as every command reads ``KEY=VALUE`` (:mod:`lanrocli.train.overrides`): by the
+Settings are read as every command reads ``KEY=VALUE`` (:mod:`lanrocli.config.overrides`): by the
 curriculum's own key paths, values as YAML. Every trial's curriculum is built and validated before any
 trial starts, each problem located at the option that caused it, so a grid with one bad value is refused as
 a whole.
@@ -27,11 +27,11 @@ from typing import Any
 import yaml
 
 from lanrocli.sweep.protocol import TrialJob
-from lanrocli.train.curriculum import Curriculum, CurriculumError
-from lanrocli.train.overrides import apply_settings, parse_key, read_settings, read_value, show, split_setting
-from lanrocli.train.runreport import run_ended
+from lanrocli.config.curriculum import Curriculum, CurriculumError
+from lanrocli.config.overrides import apply_settings, parse_key, read_settings, read_value, show, split_setting
+from lanrocli.train.report import run_ended
 from lanrocli.train.writing import LOCK, write_text
-from lanrocli.train.yamlfile import Problem
+from lanrocli.config.yamlfile import Problem
 
 SWEEP_FILE = "sweep.yaml"
 STOP_FILE = ".stop"

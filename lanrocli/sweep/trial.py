@@ -14,15 +14,15 @@ import torch
 import yaml
 from ray import tune
 
-from lanrocli.display import StepRate, evaluation_summary, stage_end_line
+from lanrocli.cli.display.training import StepRate, evaluation_summary, stage_end_line
 from lanrocli.sweep.plan import trial_started
 from lanrocli.sweep.protocol import FINISHED, RUNNING, STOPPED, StopFile, TrialJob, TrialProgress
-from lanrocli.train.curriculum import Curriculum
+from lanrocli.config.curriculum import Curriculum
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
 from lanrocli.train.runstate import StageResult
-from lanrocli.train.sections import Stage
+from lanrocli.config.sections import Stage
 from lanrocli.train.writing import lock_holder
-from lanrocli.train.yamlfile import validate
+from lanrocli.config.yamlfile import validate
 
 REPORT_SECONDS = 5.0
 """Seconds between progress reports; evaluations and stage ends are reported at once."""

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 
-from lanrocli.registry import Registry
+from lanrocli.core.registry import Registry
 from lanrocli.tasks.base import TaskDefinition
 
 REQUIRED = ("name", "gym_id", "verbs")

@@ -19,13 +19,13 @@ from pathlib import Path
 
 import torch
 
-from lanrocli.train.curriculum import Curriculum, CurriculumError, diff_curricula, load_curriculum
+from lanrocli.config.curriculum import Curriculum, CurriculumError, diff_curricula, load_curriculum
 from lanrocli.train.errors import CheckpointError, RunError
 from lanrocli.train.pipeline import CurriculumRun, RunObserver, claim_folder
 from lanrocli.train.recovery import clear_leftovers, released_on_error, restore_metrics
 from lanrocli.train.runfolder import CONFIG, LAST, METRICS, read_pointer, stage_folder
 from lanrocli.train.runstate import RunState
-from lanrocli.train.sections import Stage
+from lanrocli.config.sections import Stage
 from lanrocli.train.trainer import Trainer
 from lanrocli.train.writing import TMP_PREFIX, write_text
 

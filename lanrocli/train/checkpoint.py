@@ -32,7 +32,7 @@ from typing import Any, TypeVar
 import numpy as np
 import torch
 
-from lanrocli.agent.buffer import ReplayBuffer
+from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
 from lanrocli.agent.settings import MOVED, SACSettings
 from lanrocli.train.errors import CheckpointError
 from lanrocli.train.manifest import MANIFEST_FILE, verify_checkpoint, write_manifest

@@ -24,7 +24,7 @@ import numpy as np
 from gymnasium.utils import seeding
 from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
 
-from lanrocli.agent.transitions import EpisodeData
+from lanrocli.agent.buffer.transitions import EpisodeData
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.policies import MistakenPolicy
 from lanrocli.envs.workers import kill_at_exit, leave_signals_to_parent

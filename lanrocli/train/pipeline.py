@@ -26,8 +26,8 @@ from typing import Any
 import torch
 
 from lanrocli.agent.settings import UPDATE_METRICS
-from lanrocli.envs.evaluation import EvaluationReport
-from lanrocli.train.curriculum import Curriculum, diff_curricula
+from lanrocli.evaluation.evaluate import EvaluationReport
+from lanrocli.config.curriculum import Curriculum, diff_curricula
 from lanrocli.train.errors import RunError
 from lanrocli.train.recovery import (
     clear_leftovers,
@@ -49,10 +49,10 @@ from lanrocli.train.runfolder import (
     stage_folder,
     step_checkpoint,
 )
-from lanrocli.train.runreport import write_report
+from lanrocli.train.report import write_report
 from lanrocli.train.runstate import RunState, StageResult, pooled_rule, watched
-from lanrocli.train.sections import Stage
-from lanrocli.train.seeds import evaluation_seed
+from lanrocli.config.sections import Stage
+from lanrocli.core.seeds import evaluation_seed
 from lanrocli.train.tensorboard import TensorBoard
 from lanrocli.train.testset import TestsStopped, measure_stage
 from lanrocli.train.trainer import Trainer, TrainSettings

@@ -19,7 +19,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
-from lanrocli.train.curriculum import Curriculum, CurriculumError, load_curriculum
+from lanrocli.config.curriculum import Curriculum, CurriculumError, load_curriculum
 from lanrocli.train.errors import CheckpointError, RunError
 from lanrocli.train.runfolder import (
     BEST,

@@ -17,7 +17,7 @@ The run folder holds everything a researcher looks at or resumes from::
     set-aside/                   checkpoints newer than the one a run resumed from after damage
 
 How each file is written whole, and the lock on the folder, are :mod:`lanrocli.train.writing`'s business;
-``report.md`` is :mod:`lanrocli.train.runreport`'s; what a damaged or killed run left is
+``report.md`` is :mod:`lanrocli.train.report`'s; what a damaged or killed run left is
 :mod:`lanrocli.train.recovery`'s. The stage keeps the checkpoint before its newest, so a damaged newest one
 costs one evaluation's steps, not the stage.
 
@@ -34,8 +34,8 @@ from pathlib import Path
 from typing import Any
 
 from lanrocli.agent.settings import UPDATE_METRICS
-from lanrocli.envs.figures import METRIC_NAMES
-from lanrocli.registry import Live
+from lanrocli.evaluation.metrics import METRIC_NAMES
+from lanrocli.core.registry import Live
 from lanrocli.train.errors import CheckpointError
 from lanrocli.train.writing import fsync_dir, fsync_file, temporary
 

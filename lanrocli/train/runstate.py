@@ -6,10 +6,10 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-from lanrocli.envs.evaluation import EvaluationReport
-from lanrocli.envs.figures import Rate, wilson_interval
+from lanrocli.evaluation.evaluate import EvaluationReport
+from lanrocli.evaluation.metrics import Rate, wilson_interval
 from lanrocli.train.clock import PhaseClock
-from lanrocli.train.sections import Promote, Stage
+from lanrocli.config.sections import Promote, Stage
 
 
 @dataclass

@@ -7,7 +7,7 @@ record is what ``test.json`` holds and what ``lanro eval --json`` prints.
 The ordinary test holds few spoken corrections (about one episode in five, fewer of each kind and form), too
 few to judge how an agent follows each. The correction test makes every episode a correction episode, half
 of the spoken corrections negations where the stage has them, and runs held-out episodes of its own until
-enough corrections and negations were spoken (:class:`~lanrocli.train.quota.CorrectionQuota`).
+enough corrections and negations were spoken (:class:`~lanrocli.evaluation.quota.CorrectionQuota`).
 """
 
 from __future__ import annotations
@@ -20,18 +20,18 @@ from typing import Any
 
 import torch
 
-from lanrocli.choices import ActingAttention, Instruction, Kind, Split
+from lanrocli.core.choices import ActingAttention, Instruction, Kind, Split
 from lanrocli.envs.env import LanroEnv
-from lanrocli.envs.evaluation import SIDE_BY_SIDE, EvaluationReport, evaluate
+from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.workers import make_envs
 from lanrocli.language.vocabulary import unlearned_words
 from lanrocli.train.checkpoint import resolve_checkpoint
-from lanrocli.train.generalisation import CONTROL, CONTROLLED, DROP, paired_drops
-from lanrocli.train.quota import CORRECTION_QUOTA, CorrectionQuota
+from lanrocli.evaluation.splits import CONTROL, CONTROLLED, DROP, paired_drops
+from lanrocli.evaluation.quota import CORRECTION_QUOTA, CorrectionQuota
 from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, SPLITS
-from lanrocli.train.seeds import correction_test_seed, held_out_seed, split_test_seed
-from lanrocli.train.agent_policy import AgentPolicy
+from lanrocli.core.seeds import correction_test_seed, held_out_seed, split_test_seed
+from lanrocli.agent.policy import AgentPolicy
 from lanrocli.train.trainer import TrainSettings, load_policy
 
 CORRECTION_TEST_NEGATION_RATE = 0.5

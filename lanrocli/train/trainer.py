@@ -20,21 +20,21 @@ from typing import Any
 import numpy as np
 import torch
 
-from lanrocli.agent.buffer import ReplayBuffer
+from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
 from lanrocli.agent.networks import ObjectLayout
 from lanrocli.agent.replay import update_threads
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings, SACSettings
-from lanrocli.choices import Task, check_device
+from lanrocli.core.choices import Task, check_device
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
-from lanrocli.envs.evaluation import SIDE_BY_SIDE, EvaluationReport, evaluate
+from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.workers import EnvWorker, make_envs
 from lanrocli.language import Vocabulary, agent_vocabulary, grammar_vocabulary
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.sim import action_size
 from lanrocli.tasks import task_class
-from lanrocli.train.agent_policy import AgentPolicy
+from lanrocli.agent.policy import AgentPolicy
 from lanrocli.train.checkpoint import Checkpoint, load_checkpoint, resolve_checkpoint, save_checkpoint
 from lanrocli.train.clock import PhaseClock
 from lanrocli.train.collect import Collector

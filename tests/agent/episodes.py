@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lanrocli.agent.transitions import EpisodeData
+from lanrocli.agent.buffer.transitions import EpisodeData
 from lanrocli.language import COLOURS, SHAPES, TASK_VERBS, ObjectProps, grammar_vocabulary, instruction, object_phrases
 
 VOCAB = grammar_vocabulary()

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from lanrocli.choices import CorrectionForm
+from lanrocli.core.choices import CorrectionForm
 from lanrocli.language import (
     BEGINNING_WORDS,
     COLOURS,

@@ -13,11 +13,11 @@ from lanrocli.agent import replay, sac
 from lanrocli.agent.acting import explore
 from lanrocli.agent.replay import ReplayedActing
 from lanrocli.agent.sac import SACAgent
-from lanrocli.choices import ActingAttention
+from lanrocli.core.choices import ActingAttention
 
-from .episodes import OBS_DIM, VOCAB
-from .test_replay import SHAPES, _batches
-from .test_sac import _agent
+from tests.agent.episodes import OBS_DIM, VOCAB
+from tests.agent.test_replay import SHAPES, _batches
+from tests.agent.test_sac import _agent
 
 
 def _observations(rng: np.random.Generator, rows: int) -> dict[str, np.ndarray]:

@@ -8,10 +8,10 @@ import pytest
 import torch
 
 from lanrocli.agent.sac import SACAgent
-from lanrocli.agent.transitions import Batch
+from lanrocli.agent.buffer.transitions import Batch
 
-from .episodes import OBS_DIM
-from .test_sac import _agent, _batch, _grounding_batch
+from tests.agent.episodes import OBS_DIM
+from tests.agent.test_sac import _agent, _batch, _grounding_batch
 
 
 def _gradients(agent: SACAgent, batch: Batch) -> tuple[dict[str, float], list[torch.Tensor]]:

@@ -15,8 +15,8 @@ from lanrocli.agent.encoder import _distinct
 from lanrocli.agent.gru import read_sentences
 from lanrocli.language import PAD_ID, sample_sentence
 
-from .episodes import OBS_DIM, VOCAB
-from .test_sac import _agent, _grounding_batch
+from tests.agent.episodes import OBS_DIM, VOCAB
+from tests.agent.test_sac import _agent, _grounding_batch
 
 
 def _built() -> native.Reader:

@@ -15,7 +15,7 @@ from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import SACSettings
 
-from .episodes import ACTION_DIM, OBS_DIM, VOCAB
+from tests.agent.episodes import ACTION_DIM, OBS_DIM, VOCAB
 
 LAYOUT = ObjectLayout(arm=3, object=4, slots=3)
 

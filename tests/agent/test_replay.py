@@ -15,11 +15,11 @@ from torch.fx.experimental.proxy_tensor import make_fx
 from lanrocli.agent import native, replay
 from lanrocli.agent.losses import sac_losses
 from lanrocli.agent.sac import SACAgent
-from lanrocli.agent.transitions import Batch
+from lanrocli.agent.buffer.transitions import Batch
 from lanrocli.language import PAD_ID, sample_sentence
 
-from .episodes import OBS_DIM, VOCAB
-from .test_sac import _agent, _batch, _grounding_batch
+from tests.agent.episodes import OBS_DIM, VOCAB
+from tests.agent.test_sac import _agent, _batch, _grounding_batch
 
 SHAPES = [
     {"architecture": "objects", "sentence_in_trunk": False, "critics": 1},  # the shipped curricula's

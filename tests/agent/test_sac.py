@@ -12,14 +12,14 @@ import torch
 import torch.nn.functional as F
 
 from lanrocli.agent.acting import observed
-from lanrocli.agent.buffer import ReplayBuffer
-from lanrocli.agent.transitions import Batch
+from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
+from lanrocli.agent.buffer.transitions import Batch
 from lanrocli.agent.networks import ObjectLayout
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings, SACSettings
-from lanrocli.choices import ActingAttention
+from lanrocli.core.choices import ActingAttention
 
-from .episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
+from tests.agent.episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
 
 RED = VOCAB.encode("reach the red cube")
 BLUE = VOCAB.encode("reach the blue cube")

@@ -8,7 +8,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from lanrocli.envs.env import LanroEnv, observation_size
-from lanrocli.registration import ENV_IDS
+from lanrocli.envs.registration import ENV_IDS
 from lanrocli.envs.policies import make_policy
 from lanrocli.language import RARE_WORD_COLOURS, SHAPE_WORDS, all_corrections, all_instructions, grammar_vocabulary
 from lanrocli.sim import WORKSPACE

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lanrocli.choices import Kind, Mode
+from lanrocli.core.choices import Kind, Mode
 from lanrocli.envs.instructor import Instructor, InstructorSettings
 from lanrocli.envs.scene import Scene, sample_objects
 from lanrocli.language import (

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lanrocli.choices import Mode
+from lanrocli.core.choices import Mode
 from lanrocli.envs.scene import mode_catalogue, sample_objects, sample_positions
 
 

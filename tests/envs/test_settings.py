@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from lanrocli.choices import Kind, Mode
+from lanrocli.core.choices import Kind, Mode
 from lanrocli.envs.settings import CORRECTION_LIMIT, PLAIN_LIMIT, EnvSettings
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from lanrocli.envs.env import LanroEnv
-from lanrocli.envs.evaluation import EvaluationReport, evaluate
+from lanrocli.evaluation.evaluate import EvaluationReport, evaluate
 from lanrocli.envs.policies import make_policy
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.workers import EnvWorker, WorkerError, make_envs

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lanrocli.choices import CorrectionForm
+from lanrocli.core.choices import CorrectionForm
 from lanrocli.language import (
     BEGINNING_WORDS,
     COLOURS,

@@ -12,8 +12,8 @@ import itertools
 import numpy as np
 import pytest
 
-from lanrocli.agent.relabel import sentence_pool
-from lanrocli.choices import Kind, Mode, Split
+from lanrocli.agent.buffer.relabel import sentence_pool
+from lanrocli.core.choices import Kind, Mode, Split
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.instructor import Instructor, InstructorSettings
 from lanrocli.envs.scene import Scene, check_scenes, sample_objects

@@ -8,11 +8,11 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from lanrocli.cli import app
+from lanrocli.cli.app import app
 from lanrocli.sweep.plan import SWEEP_FILE, SweepError, SweepSpec, open_sweep, split_values
-from lanrocli.train.curriculum import CurriculumError, load_curriculum
-from lanrocli.train.overrides import SettingError
-from train.runs import tiny
+from lanrocli.config.curriculum import CurriculumError, load_curriculum
+from lanrocli.config.overrides import SettingError
+from tests.train.runs import tiny
 
 runner = CliRunner()
 

@@ -14,9 +14,9 @@ import pytest
 
 from lanrocli.sweep.plan import SWEEP_FILE
 from lanrocli.train.runfolder import REPORT
-from lanrocli.train.runreport import run_ended
+from lanrocli.train.report import run_ended
 from lanrocli.train.writing import LOCK
-from train.runs import Baseline, finish, lanro, outcome, rows, tiny, wait_until
+from tests.train.runs import Baseline, finish, lanro, outcome, rows, tiny, wait_until
 
 pytestmark = pytest.mark.slow
 

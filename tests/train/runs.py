@@ -54,7 +54,7 @@ def lanro(args: list[str], cwd: Path) -> subprocess.Popen[str]:
     """``lanro ARGS`` in a process of its own, in a new session, so a signal can go to its whole process
     group as a terminal's Ctrl-C does."""
     return subprocess.Popen(
-        [sys.executable, "-c", "from lanrocli.cli import app; app()", *args],
+        [sys.executable, "-c", "from lanrocli.cli.app import app; app()", *args],
         cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
     )
 

@@ -7,13 +7,13 @@ from pathlib import Path
 import pytest
 
 from lanrocli.train.branch import branch, branch_point
-from lanrocli.train.curriculum import load_curriculum
+from lanrocli.config.curriculum import load_curriculum
 from lanrocli.train.errors import RunError
 from lanrocli.train.pipeline import CurriculumRun
 from lanrocli.train.runfolder import CONFIG
 from lanrocli.train.writing import TMP_PREFIX
 
-from .runs import Baseline, finish, outcome, tiny, train
+from tests.train.runs import Baseline, finish, outcome, tiny, train
 
 THIRD = "negations: true, max_episode_steps: 20}\n    budget: {steps: 80}"
 LONGER_THIRD = "negations: true, max_episode_steps: 20}\n    budget: {steps: 120}"

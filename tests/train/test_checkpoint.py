@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from lanrocli.agent.buffer import ReplayBuffer
-from lanrocli.agent.transitions import EpisodeData
+from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
+from lanrocli.agent.buffer.transitions import EpisodeData
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.language import COLOURS, SHAPES, ObjectProps, grammar_vocabulary

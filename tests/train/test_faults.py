@@ -20,19 +20,19 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from lanrocli.cli import app
-from lanrocli.envs.evaluation import SIDE_BY_SIDE
+from lanrocli.cli.app import app
+from lanrocli.evaluation.evaluate import SIDE_BY_SIDE
 from lanrocli.train import checkpoint
 from lanrocli.train import writing as runfolder
 from lanrocli.train.checkpoint import AGENT_FILE, BUFFER_FILE, STATE_FILE
-from lanrocli.train.curriculum import load_curriculum
+from lanrocli.config.curriculum import load_curriculum
 from lanrocli.train.errors import RunError
 from lanrocli.train.pipeline import CurriculumRun
 from lanrocli.train.runfolder import CONFIG, LATEST, METRICS, SET_ASIDE, read_pointer
 from lanrocli.train.writing import TMP_PREFIX, RunLock
 
-from .runs import Baseline, finish, lanro, outcome, rows, tiny, train, wait_for_rows, wait_until
-from .test_yamlfile import ALIAS_BOMB
+from tests.train.runs import Baseline, finish, lanro, outcome, rows, tiny, train, wait_for_rows, wait_until
+from tests.config.test_yamlfile import ALIAS_BOMB
 
 runner = CliRunner()
 

@@ -8,13 +8,13 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from lanrocli.cli import app
-from lanrocli.envs.figures import FIGURES, METRIC_NAMES, Figure
-from lanrocli.train.curriculum import load_curriculum
+from lanrocli.cli.app import app
+from lanrocli.evaluation.metrics import FIGURES, METRIC_NAMES, Figure
+from lanrocli.config.curriculum import load_curriculum
 from lanrocli.train.pipeline import CurriculumRun
 from lanrocli.train.runfolder import METRIC_COLUMNS
 
-from .runs import rows
+from tests.train.runs import rows
 
 ONE_STAGE = """\
 name: one-stage

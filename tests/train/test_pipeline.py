@@ -11,15 +11,15 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from lanrocli.cli import app
-from lanrocli.choices import CorrectionForm, Split
-from lanrocli.envs.evaluation import EvaluationReport
-from lanrocli.envs.figures import EpisodeResult, wilson_interval
+from lanrocli.cli.app import app
+from lanrocli.core.choices import CorrectionForm, Split
+from lanrocli.evaluation.evaluate import EvaluationReport
+from lanrocli.evaluation.metrics import EpisodeResult, wilson_interval
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.checkpoint import AGENT_FILE, resolve_checkpoint
-from lanrocli.train.curriculum import Curriculum, load_curriculum
+from lanrocli.config.curriculum import Curriculum, load_curriculum
 from lanrocli.train.errors import RunError
-from lanrocli.train.generalisation import CONTROL, CONTROLLED, DROP
+from lanrocli.evaluation.splits import CONTROL, CONTROLLED, DROP
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
 from lanrocli.train.recovery import restore_files as _restore_files
 from lanrocli.train.runfolder import (
@@ -34,15 +34,15 @@ from lanrocli.train.runfolder import (
     step_checkpoint,
     write_pointer,
 )
-from lanrocli.train.runreport import render_report
-from lanrocli.train.seeds import correction_test_seed, evaluation_seed, held_out_seed, split_test_seed
-from lanrocli.train.quota import CORRECTION_QUOTA
+from lanrocli.train.report import render_report
+from lanrocli.core.seeds import correction_test_seed, evaluation_seed, held_out_seed, split_test_seed
+from lanrocli.evaluation.quota import CORRECTION_QUOTA
 from lanrocli.train.testset import Measurement, correction_test, split_test
 from lanrocli.train.testset import once_per_agent as _once_per_agent
 from lanrocli.train.testset import records as _records
 from lanrocli.train.trainer import TrainSettings
 
-from .runs import Baseline, outcome, rows, scalars, tiny, train, wait_for_rows
+from tests.train.runs import Baseline, outcome, rows, scalars, tiny, train, wait_for_rows
 
 
 def report(successes: list[bool], corrected: list[bool] | None = None) -> EvaluationReport:

@@ -18,7 +18,7 @@ from lanrocli.train.runfolder import (
     read_pointer,
     truncate_metrics,
 )
-from lanrocli.train.runreport import correction_test_lines
+from lanrocli.train.report import correction_test_lines
 from lanrocli.train.writing import write_json
 
 
@@ -62,7 +62,7 @@ def test_json_is_replaced_whole(tmp_path: Path) -> None:
 
 
 def test_a_metrics_file_of_an_older_version_gains_the_new_columns_and_still_plots(tmp_path: Path) -> None:
-    from lanrocli.train.plot import read_run
+    from lanrocli.report.plot import read_run
 
     # An older version wrote fewer columns, one of them ("correction_success") no longer written.
     old = ["stage", "stage_name", "env_steps", "success", "correction_success", "corrected_episodes_negation"]

@@ -8,10 +8,10 @@ from typing import Any
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from tensorboard.plugins.hparams import plugin_data_pb2
 
-from lanrocli.train.curriculum import load_curriculum
+from lanrocli.config.curriculum import load_curriculum
 from lanrocli.train.tensorboard import EVALUATION_FIGURES, TRAIN_POINTS, TensorBoard
 
-from .runs import Baseline, rows
+from tests.train.runs import Baseline, rows
 
 
 class Recorder:

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 from lanrocli.agent.settings import BufferSettings, SACSettings
-from lanrocli.envs.figures import ATTENTION, PHASES, PLAIN
+from lanrocli.evaluation.metrics import ATTENTION, PHASES, PLAIN
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.language import Vocabulary
 from lanrocli.language import vocabulary as vocabulary_module
 from lanrocli.train.checkpoint import load_checkpoint, save_checkpoint
-from lanrocli.train.seeds import correction_test_seed, held_out_seed
-from lanrocli.train.quota import CorrectionQuota
+from lanrocli.core.seeds import correction_test_seed, held_out_seed
+from lanrocli.evaluation.quota import CorrectionQuota
 from lanrocli.envs.policies import arm_view
 from lanrocli.tasks import OracleMemory, make_task
 from lanrocli.train import testset as testset_module
@@ -28,7 +28,7 @@ from lanrocli.train.testset import (
     correction_test,
     measure,
 )
-from lanrocli.train.agent_policy import AgentPolicy
+from lanrocli.agent.policy import AgentPolicy
 from lanrocli.train.trainer import Trainer, TrainSettings
 
 STAGE = EnvSettings(objects=2, correction_rate=0.5, negations=True, max_episode_steps=8)

@@ -1,0 +1,62 @@
+"""``lanro sample-instructions``: the sentences the instructor can speak, sampled or all of them."""
+
+from __future__ import annotations
+
+import json
+import sys
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from lanrocli.core.choices import Task
+from lanrocli.cli.display.commands import print_grammar_stats, print_sampled, write_sentences_json
+from lanrocli.language import all_sentences, grammar_vocabulary, sample_sentence, sentence_stats
+
+
+def sample_instructions(
+    task: Annotated[Task, typer.Option(help="Task whose verbs the instructor uses.")] = Task.REACH,
+    n: Annotated[int, typer.Option("--n", min=1, help="How many sentences to sample.")] = 10,
+    seed: Annotated[int, typer.Option(min=0, help="Random seed; the same seed gives the same sentences.")] = 0,
+    corrections: Annotated[bool, typer.Option("--corrections", help="Append a correction to each instruction.")] = False,
+    negations: Annotated[bool, typer.Option("--negations", help="Allow the negation beginning ('not the ...').")] = False,
+    rare: Annotated[bool, typer.Option("--rare", help="Allow rare colour words in instructions.")] = False,
+    enumerate_all: Annotated[
+        bool, typer.Option("--all", help="Enumerate every sentence of the grammar instead of sampling.")
+    ] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON array on stdout.")] = False,
+    stats: Annotated[
+        bool, typer.Option("--stats", help="Print counts (distinct sentences, vocabulary size, L, per form) only.")
+    ] = False,
+) -> None:
+    """Show sentences the instructor can speak: sampled, or all of them."""
+    if negations and not corrections:
+        raise typer.BadParameter("--negations only affects corrections; add --corrections", param_hint="--negations")
+    if enumerate_all:
+        sentences = all_sentences(task.value, corrections, negations, rare)
+    else:
+        rng = np.random.default_rng(seed)
+        sentences = iter([sample_sentence(rng, task.value, corrections, negations, rare) for _ in range(n)])
+    vocab = grammar_vocabulary()
+    if stats:
+        st = sentence_stats(sentences)
+        if as_json:
+            summary = {
+                "task": task.value,
+                "sentences": st.sentences,
+                "distinct_sentences": st.distinct,
+                "vocabulary_size": len(vocab),
+                "max_length": vocab.max_length,
+                "by_form": st.by_form,
+                "by_beginning": st.by_beginning,
+            }
+            typer.echo(json.dumps(summary))
+        else:
+            print_grammar_stats(task.value, st, vocab)
+    elif as_json:
+        write_sentences_json(sentences, vocab, sys.stdout)
+    elif enumerate_all:
+        for s in sentences:
+            typer.echo(s.text)
+    else:
+        print_sampled(sentences, vocab, f"{task.value}: {n} sampled sentences (seed {seed})")

@@ -1,0 +1,1 @@
+"""What the commands show: a training's live display and the other commands' tables."""

@@ -1,1 +1,0 @@
-"""The ``lanro`` commands, one module per group of them; :mod:`lanrocli.cli` puts them together."""
