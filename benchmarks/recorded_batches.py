@@ -36,9 +36,8 @@ def record_batches(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
     trainer = Trainer(settings, curriculum.agent.settings())
     trainer.run(args.collect)
     trainer.close()
-    agent, rng, sampling = trainer.agent, trainer.rng, settings.buffer.sampling()
-    size = agent.settings.batch_size
-    return agent, [trainer.buffer.sample(size, rng, **sampling, gamma=agent.settings.gamma) for _ in range(args.updates)]
+    agent, rng = trainer.agent, trainer.rng
+    return agent, [trainer.buffer.sample(agent.settings.batch_size, rng, settings.buffer) for _ in range(args.updates)]
 
 
 def twin(agent: SACAgent, **settings: object) -> SACAgent:

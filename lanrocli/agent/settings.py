@@ -165,12 +165,6 @@ class BufferSettings:
     relabel_negations: bool = False
     """Relabelled corrections may be negations in every stage, not only in those whose instructor speaks
     them: an agent then meets "not the ..." from its first stage on."""
-    relabel_chains: bool = False
-    """Where the arm acted on two objects other than a relabelling target, the relabelled correction is a
-    chain: one correction for each, in the order the arm acted on them, each singling out the target among
-    what is left (a curriculum must have a stage with ``max_corrections`` 2). Without it a relabelled
-    sentence never holds a second correction, which real episodes then speak only after the agent's own
-    second mistake."""
     fresh_targets: bool = False
     """Relabel only to objects the task did not already hold for before the step: a transition relabelled to
     an object the arm had already pushed or was touching is won whatever its action, and teaches nothing."""
@@ -178,50 +172,16 @@ class BufferSettings:
     """Teach the attention on stored transitions too: wherever a transition's sentence singles out its
     goal (every step of a plain episode, the steps after a spoken correction), the goal is its label. A
     transition whose correction is still pending is never labelled."""
-    falls_fail: bool = False
-    """Value an episode that ended by dropping an object off the table as lost for good (the return of a
-    failure that never ends, -1 / (1 - gamma)) rather than as one cut off by the time limit, whose future
-    is bootstrapped. Without it nothing teaches the agent to keep objects on the table: pushing the wrong
-    object on until it falls, while a correction is on its way, costs nothing in the targets."""
-    lost_fails: bool = False
-    """Value a transition that leaves the object its sentence is about where the task can no longer hold for
-    it (``TaskDefinition.lost``: fallen off the table; for reach, knocked farther than it may move) as lost
-    for good, as ``falls_fail`` does a fall. Reach needs it where falls do not: a goal knocked away on the
-    arm's way to a wrong object is lost though the episode runs on, and only the critic's bootstrap, over
-    the rest of the episode, would otherwise learn that."""
-    knock_cost: float = 0.0
-    """Subtracted from a transition's reward for each step it spans that leaves an object newly lost
-    (``TaskDefinition.lost``: fallen; for reach, knocked farther than it may move), whatever its sentence
-    is about. Reach loses a goal knocked on the arm's way between objects, which the arm, attending to
-    one object, cannot see; a cost on every knock asks it to travel clear of all of them. The targets'
-    floor stays the failure's return, so the cost is cut off only where values already sit there."""
-    n_step: int = 1
-    """Bellman targets over this many stored steps (n-step returns), cut at the episode's end and at its
-    goal's success: a sparse success reaches the states that led to it in 1/n of the updates. 1 is the
-    paper's one-step target."""
 
     def __post_init__(self) -> None:
-        if not 1 <= self.n_step <= 100:
-            raise ValueError(f"n_step must be a number of steps from 1 to 100, got {self.n_step}")
         if not 1 <= self.size < 2**31:
             raise ValueError(f"size must be a positive number of transitions below 2**31, got {self.size}")
-        if not self.knock_cost >= 0.0:
-            raise ValueError(f"knock_cost must be a reward of 0 or more to subtract, got {self.knock_cost}")
         for name in ("relabel_ratio", "correction_share", "hindsight_share"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
 
-    def sampling(self) -> dict[str, float | int]:
-        """The keyword arguments of :meth:`ReplayBuffer.sample` these settings ask for (the discount is the
-        agent's)."""
-        return {
-            "relabel_ratio": self.relabel_ratio,
-            "correction_share": self.correction_share if self.relabel_corrections else 0.0,
-            "hindsight_share": self.hindsight_share,
-            "n_step": self.n_step,
-            "fresh_targets": self.fresh_targets,
-            "ground_real": self.ground_real,
-            "falls_fail": self.falls_fail,
-            "lost_fails": self.lost_fails,
-            "knock_cost": self.knock_cost,
-        }
+    @property
+    def corrected_share(self) -> float:
+        """The share of relabelled sentences that are corrections: ``correction_share``, or none without
+        ``relabel_corrections``."""
+        return self.correction_share if self.relabel_corrections else 0.0

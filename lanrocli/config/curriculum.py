@@ -10,15 +10,14 @@ the ``agent``, ``buffer`` and ``env`` sections generated from the dataclasses th
 from __future__ import annotations
 
 import difflib
-import warnings
 from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
-from lanrocli.agent.settings import MOVED, BufferSettings
+from lanrocli.agent.settings import BufferSettings
 from lanrocli.core.choices import Kind, Split, Task
 from lanrocli.envs.scene import check_scenes
 from lanrocli.config.overrides import apply_settings
@@ -76,29 +75,6 @@ class Curriculum(BaseModel):
     stages: list[Stage]
     holdout: HoldoutConfig = Field(default_factory=HoldoutConfig)
 
-    @model_validator(mode="before")
-    @classmethod
-    def _moved_out_of_agent(cls, data: Any) -> Any:
-        """Read the settings that left ``agent`` (the replay buffer's and the loop's) where they are now."""
-        agent = data.get("agent") if isinstance(data, dict) else None
-        moved = [name for name in MOVED if isinstance(agent, dict) and name in agent]
-        if not moved:
-            return data
-        warnings.warn(
-            f"agent keys {', '.join(moved)} are read as buffer.size (for buffer_size), buffer.* and the top-level "
-            "updates_per_step, where they belong now; move them there",
-            FutureWarning,
-            stacklevel=2,
-        )
-        buffer = dict(data.get("buffer") or {})
-        data = {**data, "agent": {key: value for key, value in agent.items() if key not in MOVED}}
-        for name in moved:
-            if name == "updates_per_step":
-                data.setdefault(name, agent[name])
-            else:
-                buffer.setdefault("size" if name == "buffer_size" else name, agent[name])
-        return {**data, "buffer": buffer}
-
     @field_validator("stages")
     @classmethod
     def _stages_distinct(cls, stages: list[Stage]) -> list[Stage]:
@@ -125,17 +101,6 @@ class Curriculum(BaseModel):
                 stage.env.settings().check_task(task)
             except ValueError as error:
                 raise ValueError(f"stages[{index}].env: {error}") from None
-        return stages
-
-    @field_validator("stages")
-    @classmethod
-    def _chains_to_relabel(cls, stages: list[Stage], info: ValidationInfo) -> list[Stage]:
-        buffer = info.data.get("buffer")  # absent when the buffer section itself failed validation
-        if buffer is not None and buffer.relabel_chains and max(stage.env.max_corrections for stage in stages) < 2:
-            raise ValueError(
-                "buffer.relabel_chains relabels chains of corrections, which no stage speaks: give a stage "
-                "max_corrections: 2, or leave relabel_chains out"
-            )
         return stages
 
     @field_validator("holdout")

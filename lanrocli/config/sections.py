@@ -150,11 +150,11 @@ class StageEval(BaseModel):
 
 STAGE_BUFFER_KEYS = (
     "relabel_ratio", "correction_share", "hindsight_share", "relabel_corrections", "relabel_negations",
-    "fresh_targets", "ground_real", "falls_fail", "lost_fails", "knock_cost", "n_step",
+    "fresh_targets", "ground_real",
 )
 """The ``BufferSettings`` a stage may change: how batches are drawn and relabelled (``relabel_negations``
-for the episodes stored from the stage on, whose sentence pools it fills). The buffer's size and whether its
-pools hold chains of corrections are fixed when the run's buffer is built."""
+for the episodes stored from the stage on, whose sentence pools it fills). The buffer's size is fixed when
+the run's buffer is built."""
 
 
 class _StageBufferBase(BaseModel):

@@ -76,8 +76,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     Episodes start with the end effector at (0, 0, 0.10); ``random_start`` is the share that starts at a
     random point of the workspace near the table instead, clear of the objects, ``object_start`` (grasp
     and lift) the share that starts with the open hand around a random object, and ``mistake_start`` the
-    share that starts with the task just done on a wrong object, of which ``second_mistake`` goes on, once
-    that is corrected, to another wrong object (all for training).
+    share that starts with the task just done on a wrong object (all for training).
 
     ``instruction`` is the current goal sentence (instruction, plus the correction from the step it is
     spoken) as token ids of ``vocabulary`` (by default the grammar's; an agent's own when one is run),
@@ -85,9 +84,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     object, else -1; success ends the episode (terminated), and so does the goal falling off the table
     (truncated, with ``info["fell"]``: the episode is lost, not merely out of time); another object may
     fall to the floor and the episode goes on. ``info`` carries
-    ``is_success``, ``achieved`` (per object), ``lost`` (per object: the task can no longer hold for it, as
-    ``TaskDefinition.lost`` says), ``goal_index``,
-    ``object_positions``, ``objects`` (``ObjectProps`` in observation order), ``instruction_text``,
+    ``is_success``, ``achieved`` (per object), ``goal_index``, ``object_positions``, ``objects`` (``ObjectProps`` in observation order), ``instruction_text``,
     ``challenge`` (the ``Kind`` of misunderstanding of a correction episode, or ``None``) and ``correction``
     (``None`` until spoken).
     """
@@ -161,7 +158,6 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._empty_slots = np.zeros((slots - objects) * OBJECT_SIZE)
         self._tokens = np.zeros(self.vocabulary.max_length, dtype=np.int64)
         self._achieved = np.zeros(objects, dtype=bool)
-        self._lost = np.zeros(objects, dtype=bool)
         self._steps = 0
         self._fell = False
         self._area_low = np.array(OBJECT_AREA.low[:2])
@@ -203,8 +199,6 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.instructor.start(rng, scene, challenge)
         if self.settings.mistake_start > 0.0 and rng.random() < self.settings.mistake_start:
             self._act_on_a_wrong_object(rng)
-            if self.settings.second_mistake > 0.0 and rng.random() < self.settings.second_mistake:
-                self._err_twice(rng)
         self._tokens = self.vocabulary.encode(self.instructor.text)
         self._steps = 0
         self._achieved = self._evaluate()
@@ -218,22 +212,6 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         beside what was just moved) is where corrections are lost; a mistake start shows it in any stage."""
         assert self._scene is not None
         self._do_the_task_on(int(rng.choice([k for k in range(self.n_objects) if k != self._scene.goal_index])))
-
-    def _err_twice(self, rng: np.random.Generator) -> None:
-        """After a mistake start, the instructor corrects it at once, the oracle does the task on the other
-        wrong object, and the instructor corrects that too: the episode opens with the arm on a wrong object
-        and a sentence of two corrections. An agent meets that sentence only after misreading a first
-        correction, and hindsight relabelling writes such chains only where the arm itself visited two wrong
-        objects. Where a step of this does not happen (no correction to speak, the oracle unfinished) the
-        episode opens there."""
-        assert self._scene is not None
-        achieved = self._evaluate()
-        if not self.instructor.correct_at_once(rng, achieved):
-            return
-        left = [k for k in range(self.n_objects) if k != self._scene.goal_index and not achieved[k]]
-        if left:
-            self._do_the_task_on(int(rng.choice(left)))
-            self.instructor.correct_at_once(rng, self._evaluate())
 
     def _do_the_task_on(self, wrong: int) -> None:
         assert self._scene is not None
@@ -267,7 +245,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     # -- what the agent and the tools see --------------------------------------------------------------
 
     def _evaluate(self) -> np.ndarray:
-        """Per object, whether the task holds for it; records which objects it can no longer hold for."""
+        """Per object, whether the task holds for it."""
         states = self.objects.states()
         contacts = self.robot.contacts(self.objects.body_ids)
         view = TaskView(
@@ -278,7 +256,6 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             heights=self._heights,
             ee_position=self.robot.state().ee_position,
         )
-        self._lost = self.task.lost(view)
         return self.task.achieved(view)
 
     def _observation(self) -> dict[str, np.ndarray]:
@@ -313,7 +290,6 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "instruction_text": self.instructor.text,
             "challenge": self.instructor.challenge,
             "fell": self._fell,
-            "lost": self._lost.copy(),
             "correction": None if spoken is None else spoken.as_info(),
         }
 

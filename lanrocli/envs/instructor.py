@@ -190,16 +190,6 @@ class Instructor:
         self._speak(rng, step, triggered_at, touched)
         return True
 
-    def correct_at_once(self, rng: np.random.Generator, achieved: np.ndarray) -> bool:
-        """Speak the next correction now, before the first step and without a delay, where ``observe``
-        would schedule one: a mistake start that goes on to a second mistake (``EnvSettings.second_mistake``)
-        corrects both before the episode opens. Return whether one was spoken."""
-        wrong = self._uncorrected_mistakes(achieved)
-        if not wrong:
-            return False
-        self._speak(rng, 0, 0, int(pick(rng, wrong)))
-        return True
-
     def _uncorrected_mistakes(self, achieved: np.ndarray) -> list[int]:
         """The wrong objects the task holds for and no correction named yet, where one more may be spoken."""
         if self.challenge is None or len(self.corrections) >= self.settings.max_corrections or self._scene is None:

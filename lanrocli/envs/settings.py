@@ -84,25 +84,6 @@ class EnvSettings:
             "corrects, drawn on top of the arm's start."
         ),
     )
-    second_mistake: float = field(
-        default=0.0,
-        metadata=_help(
-            "Share of mistake starts in correction episodes that go on before the first step: the instructor "
-            "corrects the mistake, the oracle does the task on the other wrong object, and the instructor "
-            "corrects again, so the episode opens after a second correction (needs mistake_start, "
-            "max_corrections 2 and three objects)."
-        ),
-    )
-    scripted_recovery: float = field(
-        default=0.0,
-        metadata=_help(
-            "Share of correction episodes that the scripted policy acts in place of the agent (for training; "
-            "evaluation never lets it act): it does the task on a wrong object, is corrected, and does it on "
-            "the goal, a recovery stored in the replay buffer for the agent to learn from off-policy.",
-            option=False,
-        ),
-    )
-
     def __post_init__(self) -> None:
         if isinstance(self.objects, bool) or self.objects not in (2, 3):
             raise ValueError(f"objects must be 2 or 3, got {self.objects!r}")
@@ -116,18 +97,6 @@ class EnvSettings:
             raise ValueError(f"random_start must be a probability within [0, 1], got {self.random_start}")
         if not 0.0 <= self.mistake_start <= 1.0:
             raise ValueError(f"mistake_start must be a probability within [0, 1], got {self.mistake_start}")
-        if not 0.0 <= self.second_mistake <= 1.0:
-            raise ValueError(f"second_mistake must be a probability within [0, 1], got {self.second_mistake}")
-        chains = self.mistake_start > 0.0 and self.max_corrections >= 2 and self.objects == 3
-        if self.second_mistake > 0.0 and self.correction_rate > 0.0 and not chains:
-            raise ValueError(
-                f"second_mistake is {self.second_mistake:g}, a share of mistake starts that go on to a second "
-                f"wrong object and its correction: it needs mistake_start above 0 (got {self.mistake_start:g}), "
-                f"max_corrections 2 (got {self.max_corrections}) and objects 3 (got {self.objects}); set those, "
-                "or leave second_mistake at 0"
-            )
-        if not 0.0 <= self.scripted_recovery <= 1.0:
-            raise ValueError(f"scripted_recovery must be a probability within [0, 1], got {self.scripted_recovery}")
         if not 0.0 <= self.object_start <= 1.0 - self.random_start:
             raise ValueError(
                 f"object_start must be within [0, 1 - random_start] = [0, {1.0 - self.random_start:g}] (the two "
@@ -157,11 +126,11 @@ class EnvSettings:
 
     def for_evaluation(self, correction_rate: float | None = None) -> EnvSettings:
         """These settings as evaluation uses them: every episode starts from the neutral pose and the agent
-        acts in all of them (random, object and mistake starts and scripted recoveries are for training), so
+        acts in all of them (random, object and mistake starts are for training), so
         success is comparable across runs and curricula.
         ``correction_rate``, where given, replaces a non-zero share of correction episodes; settings without
         corrections keep none, since their episodes are not built to hold one."""
-        training_only = ("random_start", "object_start", "mistake_start", "second_mistake", "scripted_recovery")
+        training_only = ("random_start", "object_start", "mistake_start")
         changes: dict[str, Any] = dict.fromkeys(training_only, 0.0)
         if correction_rate is not None and self.correction_rate > 0:
             changes["correction_rate"] = correction_rate

@@ -108,12 +108,6 @@ class TaskDefinition:
         """Per object, whether the task is done on it in this state."""
         raise NotImplementedError
 
-    def lost(self, view: TaskView) -> np.ndarray:
-        """Per object, whether the task can no longer be done on it in this episode: it fell off the table.
-        A task whose condition asks more of the object (reach: that it was not knocked away) says so too;
-        the learner may then value such a state as failure for ever (``BufferSettings.lost_fails``)."""
-        return view.positions[:, 2] < FALLEN
-
     def oracle(self, view: ArmView, memory: OracleMemory) -> np.ndarray:
         """The scripted oracle's action for doing the task on ``view.target``."""
         raise NotImplementedError

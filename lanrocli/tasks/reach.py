@@ -30,10 +30,6 @@ class Reach(TaskDefinition):
         touch = view.left_finger | view.right_finger
         return touch & ~_knocked(view)
 
-    def lost(self, view: TaskView) -> np.ndarray:
-        """An object knocked away cannot be reached any more: nothing in the task puts it back."""
-        return super().lost(view) | _knocked(view)
-
     def oracle(self, view: ArmView, memory: OracleMemory) -> np.ndarray:
         ee, pos, top = view.ee_position, view.target_position, view.target_top
         if np.linalg.norm(ee[:2] - pos[:2]) > ALIGNED:

@@ -9,10 +9,6 @@ that (see :mod:`lanrocli.train.runfolder`). Loading uses ``torch.load(weights_on
 Each checkpoint ends with ``manifest.json`` (:mod:`lanrocli.train.manifest`), so a truncated or altered file
 is found before it is read, and named. A write that fails (a full disk, a folder made read-only) removes its temporary
 directory and says how much room the checkpoint needs; the checkpoints written before it stay whole.
-
-Files written by older versions load too: their ``state.json`` also holds ``agent_settings``, a second copy
-of the settings that ``agent.pt`` holds, which is ignored; and their agent's settings hold those of the
-replay buffer and the training loop, which are read into the training settings.
 """
 
 from __future__ import annotations
@@ -33,7 +29,7 @@ import numpy as np
 import torch
 
 from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
-from lanrocli.agent.settings import MOVED, SACSettings
+from lanrocli.agent.settings import SACSettings
 from lanrocli.train.errors import CheckpointError
 from lanrocli.train.manifest import MANIFEST_FILE, verify_checkpoint, write_manifest
 from lanrocli.train.runfolder import LATEST, STATE_FILE, read_pointer
@@ -68,7 +64,7 @@ class Checkpoint:
     environments: list[dict[str, Any]] | None = None
     """Each environment's snapshot, to rebuild it mid-episode."""
     clock: dict[str, Any] = field(default_factory=dict)
-    """Where the run's time went (``PhaseClock``); empty in checkpoints written before it was kept."""
+    """Where the run's time went (``PhaseClock``)."""
 
     def __post_init__(self) -> None:
         if len({part is None for part in (self.buffer, self.partials, self.environments)}) > 1:
@@ -225,13 +221,13 @@ def load_checkpoint(directory: Path, device: str | torch.device = "cpu", resumab
     try:
         return Checkpoint(
             agent=agent,
-            train_settings=_train_settings(state["train_settings"], agent["settings"]),
+            train_settings=state["train_settings"],
             vocabulary=state["vocabulary"],
             progress=state["progress"],
             rng=state_from_json(state["rng"]),
             wall_time=float(state["wall_time"]),
             extra=state["extra"],
-            clock=state.get("clock", {}),
+            clock=state["clock"],
             buffer=_reading(directory / BUFFER_FILE, _read_buffer) if resumable else None,
             partials=_reading(directory / PARTIAL_FILE, _read_partials) if resumable else None,
             environments=state["environments"] if resumable else None,
@@ -246,17 +242,6 @@ def _reading(path: Path, read: Callable[[Path], T]) -> T:
         return read(path)
     except (OSError, EOFError, ValueError, KeyError, zipfile.BadZipFile) as error:
         raise CheckpointError(f"{path} is damaged: {error}") from None
-
-
-def _train_settings(saved: dict[str, Any], agent_settings: dict[str, Any]) -> dict[str, Any]:
-    """The training settings of a checkpoint. One written before the replay buffer's and the training loop's
-    settings left the agent's keeps them among the agent's settings, and they are read from there."""
-    if "buffer" in saved:
-        return saved
-    moved = {name: agent_settings[name] for name in MOVED if name in agent_settings}
-    loop = {"updates_per_step": moved.pop("updates_per_step")} if "updates_per_step" in moved else {}
-    buffer = {"size" if name == "buffer_size" else name: value for name, value in moved.items()}
-    return {**saved, **loop, "buffer": buffer}
 
 
 def load_agent_state(directory: Path, device: str | torch.device = "cpu") -> dict[str, Any]:

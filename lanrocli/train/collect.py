@@ -5,11 +5,6 @@ entries the vector API can stack, and (2) remembers the random state its current
 the actions taken since. A checkpoint stores those; a resumed run rebuilds the environment exactly where
 it was by resetting with that state and replaying the actions (PyBullet is deterministic), so a resumed
 run continues the same episodes instead of starting new ones.
-
-In a share of correction episodes (``scripted_recovery``) the scripted policy acts instead of the agent:
-it does the task on a wrong object, is corrected, and does it on the goal. The agent learns from those
-transitions off-policy, as from its own; they show the recovery after a correction (let go, move off, go to
-the goal beside what was just moved), where the agent's own episodes are mostly lost.
 """
 
 from __future__ import annotations
@@ -26,7 +21,6 @@ from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
 
 from lanrocli.agent.buffer.transitions import EpisodeData
 from lanrocli.envs.env import LanroEnv
-from lanrocli.envs.policies import MistakenPolicy
 from lanrocli.envs.workers import kill_at_exit, leave_signals_to_parent
 from lanrocli.language import ObjectProps
 from lanrocli.train.checkpoint import state_from_json, state_to_json
@@ -56,9 +50,6 @@ class TrainingEnv(gym.Wrapper):
         self._start_state: dict[str, Any] = {}
         self._actions: list[list[float]] = []
         self._objects = np.zeros((0, 2), dtype=np.int64)
-        self._script: MistakenPolicy | None = None
-        """The scripted policy acting this episode in the agent's place, or None."""
-        self._last: tuple[dict[str, np.ndarray], dict[str, Any]] = ({}, {})
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):  # type: ignore[override]
         if self._restore is not None:
@@ -69,15 +60,12 @@ class TrainingEnv(gym.Wrapper):
         self._start_state = dict(self.unwrapped.np_random.bit_generator.state)
         self._actions = []
         obs, info = self.env.reset(options=options)
-        return obs, self._flat_reset(obs, info)
+        return obs, self._flat_reset(info)
 
     def step(self, action: np.ndarray):  # type: ignore[override]
         self._actions.append(np.asarray(action, dtype=np.float64).tolist())
-        if self._script is not None:
-            action = self._script.act(*self._last)
         obs, reward, terminated, truncated, info = self.env.step(action)
-        self._last = obs, info
-        return obs, reward, terminated, truncated, self._flat(info, action)
+        return obs, reward, terminated, truncated, self._flat(info)
 
     def snapshot(self) -> dict[str, Any]:
         return EnvSnapshot(self._start_state, list(self._actions)).to_dict()
@@ -89,37 +77,24 @@ class TrainingEnv(gym.Wrapper):
         self._start_state = dict(snapshot.start_state)
         self._actions = []
         obs, info = self.env.reset()
-        flat = self._flat_reset(obs, info)
+        flat = self._flat_reset(info)
         for action in snapshot.actions:
             obs, _, _, _, flat = self.step(np.asarray(action))
         return obs, flat
 
-    def _flat_reset(self, obs: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
+    def _flat_reset(self, info: dict[str, Any]) -> dict[str, Any]:
         """The objects stay the same all episode, and the vector API stacks arrays: they travel as their
-        indices, computed once per episode. Whether the scripted policy acts is drawn here, from the
-        episode's own generator, so replaying the episode from its start state draws it again."""
+        indices, computed once per episode."""
         self._objects = np.array([o.indices for o in info["objects"]], dtype=np.int64)
-        self._script, self._last = None, (obs, info)
-        share, rng = self.unwrapped.settings.scripted_recovery, self.unwrapped.np_random
-        if share > 0.0 and info["challenge"] is not None and rng.random() < share:
-            self._script = MistakenPolicy(self.unwrapped.task.name)
-            self._script.reset(seed=int(rng.integers(2**32)))
         return self._flat(info)
 
-    def _flat(self, info: dict[str, Any], action: np.ndarray | None = None) -> dict[str, Any]:
-        """``action``: what the arm was given at this step, the scripted policy's in its episodes (zeros
-        after a reset, where the vector API needs the entry to exist)."""
-        size = self.action_space.shape
+    def _flat(self, info: dict[str, Any]) -> dict[str, Any]:
         return {
             "achieved": np.asarray(info["achieved"], dtype=bool),
             "goal_index": int(info["goal_index"]),
             "correction_episode": info["challenge"] is not None,
-            "scripted": self._script is not None,
-            "action": np.zeros(size, np.float32) if action is None else np.asarray(action, dtype=np.float32),
             "objects": self._objects,
             "is_success": bool(info["is_success"]),
-            "fell": bool(info["fell"]),
-            "lost": np.asarray(info["lost"], dtype=bool),
         }
 
 
@@ -138,8 +113,6 @@ class _Partial:
     rewards: list[float] = field(default_factory=list)
     terminated: list[bool] = field(default_factory=list)
     achieved: list[np.ndarray] = field(default_factory=list)
-    fell: list[bool] = field(default_factory=list)
-    lost: list[np.ndarray] = field(default_factory=list)
 
     def episode(self, task: str) -> EpisodeData:
         return EpisodeData(
@@ -151,8 +124,6 @@ class _Partial:
             rewards=np.asarray(self.rewards, dtype=np.float32),
             terminated=np.asarray(self.terminated, dtype=bool),
             achieved=np.stack(self.achieved),
-            fell=np.asarray(self.fell, dtype=bool),
-            lost=np.stack(self.lost),
             goal_index=self.goal_index,
             objects=self.objects,
             task=task,
@@ -164,8 +135,6 @@ class _Partial:
 class FinishedEpisode:
     data: EpisodeData
     success: bool
-    scripted: bool = False
-    """Acted by the scripted policy: stored for learning, but not the agent's success."""
 
 
 class Collector:
@@ -232,10 +201,6 @@ class Collector:
                 setattr(p, key, list(data[key]))
             p.rewards = list(map(float, data["rewards"]))
             p.terminated = list(map(bool, data["terminated"]))
-            # Checkpoints written before falls were recorded: a fall ends its episode, so none is in a partial.
-            p.fell = list(map(bool, data.get("fell", np.zeros(len(p.rewards), dtype=bool))))
-            # Checkpoints written before losses were recorded: read as nothing lost so far.
-            p.lost = list(data.get("lost", np.zeros((len(p.rewards), len(p.objects)), dtype=bool)))
 
     def partials(self) -> list[dict[str, np.ndarray]]:
         """Each environment's unfinished episode as arrays, for the checkpoint."""
@@ -259,8 +224,6 @@ class Collector:
                     "rewards": rows(p.rewards, np.float32),
                     "terminated": rows(p.terminated, bool),
                     "achieved": rows(p.achieved, bool, len(p.objects)),
-                    "fell": rows(p.fell, bool),
-                    "lost": rows(p.lost, bool, len(p.objects)),
                 }
             )
         return out
@@ -288,15 +251,12 @@ class Collector:
             p.instructions.append(self._obs["instruction"][i])
             p.next_observations.append(next_obs["observation"])
             p.next_instructions.append(next_obs["instruction"])
-            p.actions.append(np.array(step_info["action"][i], dtype=np.float32))  # the scripted policy's, in its episodes
+            p.actions.append(np.array(self._actions[i], dtype=np.float32))
             p.rewards.append(float(rewards[i]))
             p.terminated.append(bool(terminated[i]))
             p.achieved.append(np.asarray(step_info["achieved"][i], dtype=bool))
-            p.fell.append(bool(step_info["fell"][i]))
-            p.lost.append(np.asarray(step_info["lost"][i], dtype=bool))
             if ended:
-                success, scripted = bool(step_info["is_success"][i]), bool(step_info["scripted"][i])
-                finished.append(FinishedEpisode(p.episode(self.task), success, scripted))
+                finished.append(FinishedEpisode(p.episode(self.task), bool(step_info["is_success"][i])))
                 self._partials[i] = self._new_partial(info, i)
         self._obs = obs
         return finished

@@ -1,6 +1,5 @@
 """A checkpoint's ``manifest.json``: the format version and the size and SHA-256 of every other file, so a
-truncated or altered file is found before it is read, and named. Checkpoints written before the manifest
-(format 1) load unchecked."""
+truncated or altered file is found before it is read, and named."""
 
 from __future__ import annotations
 
@@ -13,7 +12,7 @@ from lanrocli.train.errors import CheckpointError
 
 MANIFEST_FILE = "manifest.json"
 FORMAT = 2
-"""The checkpoint format this version writes: 2 added ``manifest.json``; 1 is read too."""
+"""The checkpoint format this version writes and reads."""
 
 
 def write_manifest(directory: Path, names: list[str]) -> None:
@@ -23,18 +22,18 @@ def write_manifest(directory: Path, names: list[str]) -> None:
 
 
 def verify_checkpoint(directory: Path, names: tuple[str, ...]) -> None:
-    """Check ``names`` against the checkpoint's manifest (size, then SHA-256); a checkpoint written before
-    manifests existed passes unchecked. Raises a ``CheckpointError`` naming the first damaged file."""
+    """Check ``names`` against the checkpoint's manifest (size, then SHA-256). Raises a ``CheckpointError``
+    naming the first damaged file, or the manifest where it is missing."""
     path = directory / MANIFEST_FILE
     if not path.is_file():
-        return  # format 1: its files are checked as they are read
+        raise CheckpointError(f"{directory} cannot be used: its {MANIFEST_FILE} is missing")
     try:
         manifest = json.loads(path.read_text())
         version, files = int(manifest["format"]), manifest["files"]
     except (ValueError, KeyError, TypeError, UnicodeDecodeError):
         raise CheckpointError(f"{path} is damaged: it is not the manifest lanro writes") from None
-    if version > FORMAT:
-        raise CheckpointError(f"{directory} has checkpoint format {version}; this lanro reads up to {FORMAT}: upgrade it")
+    if version != FORMAT:
+        raise CheckpointError(f"{directory} has checkpoint format {version}; this lanro reads format {FORMAT}")
     for name in names:
         expected = files.get(name)
         if expected is None:

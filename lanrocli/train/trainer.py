@@ -118,11 +118,29 @@ class TrainSettings:
         return cls(
             **{
                 **data,
-                "env": EnvSettings(**data["env"]),
-                "buffer": BufferSettings(**data.get("buffer", {})),
+                "env": EnvSettings(**_without_retired("env", data["env"])),
+                "buffer": BufferSettings(**_without_retired("buffer", data.get("buffer", {}))),
                 "holdout": Holdout.from_dict(data.get("holdout")),
             }
         )
+
+
+RETIRED: dict[str, dict[str, Any]] = {
+    "buffer": {"relabel_chains": False, "falls_fail": False, "lost_fails": False, "knock_cost": 0.0, "n_step": 1},
+    "env": {"second_mistake": 0.0, "scripted_recovery": 0.0},
+}
+"""Settings that checkpoints of the current format hold (the shipped agents among them) and that lanro no
+longer has, each with the one value that means what lanro now always does."""
+
+
+def _without_retired(section: str, data: Mapping[str, Any]) -> dict[str, Any]:
+    """``data`` without the ``RETIRED`` settings of ``section``; a checkpoint trained with another value of
+    one is refused, since this version cannot train or act as it did."""
+    kept = dict(data)
+    for name, value in RETIRED[section].items():
+        if name in kept and kept.pop(name) != value:
+            raise ValueError(f"trained with {section}.{name}: {data[name]!r}, which lanro no longer has")
+    return kept
 
 
 def pick_device(requested: str | None) -> torch.device:
@@ -197,7 +215,6 @@ class Trainer:
             negations=settings.env.negations or settings.buffer.relabel_negations,
             seed=settings.seed,
             holdout=settings.holdout,
-            chain=settings.sentence_corrections if settings.buffer.relabel_chains else 1,
         )
         self.rng = np.random.default_rng(np.random.SeedSequence(settings.seed).spawn(2)[1])
         self.progress = Progress()
@@ -258,9 +275,8 @@ class Trainer:
                 self.buffer.add_episode(episode.data)
                 self.agent.update_normalizer(episode.data.observations)
                 self.progress.episodes += 1
-                if not episode.scripted:
-                    self.progress.train_successes.append(episode.success)
-                    del self.progress.train_successes[:-SUCCESS_WINDOW]
+                self.progress.train_successes.append(episode.success)
+                del self.progress.train_successes[:-SUCCESS_WINDOW]
             self.progress.env_steps += s.envs
             self.clock.collection_s += time.perf_counter() - step_started
             if on_step is not None:

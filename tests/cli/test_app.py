@@ -185,10 +185,6 @@ def test_eval_table_and_bad_values() -> None:
     assert bad.exit_code == 2 and "scripted policies read no sentence" in bad.output
     bad = runner.invoke(app, ["eval", "oracle", "--task", "push", "--object-start", "0.5"])
     assert bad.exit_code == 2 and "object_start is 0.5, but it needs a task with a gripper" in bad.output
-    # Only training's collection lets the scripted policy act; eval and play have no such option.
-    for command in (["eval", "oracle"], ["play", "push"]):
-        bad = runner.invoke(app, [*command, "--scripted-recovery", "0.5"])
-        assert bad.exit_code == 2 and "--scripted-recovery" in bad.output
 
 
 def test_eval_writes_a_gif(tmp_path) -> None:
@@ -264,13 +260,12 @@ def test_every_shipped_curriculum_checks(tmp_path) -> None:
         assert "environment steps in all" in result.output
 
 
-def test_check_names_the_stages_that_sample_otherwise() -> None:
-    from pathlib import Path
-
-    screen = Path(__file__).parents[1] / "benchmarks" / "screens" / "reach-lost-fails.yaml"
+def test_check_names_the_stages_that_sample_otherwise(tmp_path: Path) -> None:
+    screen = tmp_path / "screen.yaml"
+    screen.write_text(QUICK.read_text() + "    buffer: {fresh_targets: false}\n")
     result = runner.invoke(app, ["check", str(screen)], terminal_width=200)
     assert result.exit_code == 0, result.output
-    assert "stage 3 (negations) samples with {'lost_fails': True}" in result.output
+    assert "stage 3 (negations) samples with {'fresh_targets': False}" in result.output
     assert "stage 2 (corrections) samples" not in result.output
 
 
@@ -415,16 +410,6 @@ def test_eval_table_has_every_form_and_marks_what_is_not_judged() -> None:
     for form in ("after an excuse", "after a negation", "after an edit"):
         assert f"correction spoken, {form}" in result.output
     assert "wrong_object, correction spoken *" in result.output and "* fewer than 30 spoken corrections" in result.output
-
-
-def test_eval_probes_second_corrections_and_refuses_a_second_mistake_without_chains() -> None:
-    probe = ["eval", "oracle", "--episodes", "4", "--objects", "3", "--correction-rate", "1", "--mistake-start", "1",
-             "--second-mistake", "1", "--json"]
-    result = runner.invoke(app, [*probe, "--max-corrections", "2"])
-    assert result.exit_code == 0, result.output
-    assert json.loads(result.output)["by_index"]["2"]["episodes"] >= 3  # a mistake the oracle left unfinished opens early
-    refused = runner.invoke(app, probe)
-    assert refused.exit_code == 2 and "max_corrections 2 (got 1)" in refused.output, refused.output
 
 
 def test_eval_correction_test_of_a_checkpoint_and_its_refusals(untrained_checkpoint: Path) -> None:

@@ -84,8 +84,6 @@ def test_env_section_is_the_environments_settings() -> None:
         "random_start": 0.0,
         "object_start": 0.0,
         "mistake_start": 0.0,
-        "second_mistake": 0.0,
-        "scripted_recovery": 0.0,
     }
     assert list(EnvConfig.model_fields) == [f.name for f in dataclasses.fields(EnvSettings)]
 
@@ -209,30 +207,22 @@ def test_a_stage_evaluation_replaces_the_curriculums_keys_it_gives_for_that_stag
 
 def test_a_stage_buffer_replaces_the_curriculums_sampling_keys_it_gives_for_that_stage_alone(tmp_path: Path) -> None:
     text = "buffer: {relabel_ratio: 0.5, size: 5000}\n" + MINIMAL + (
-        "  - name: second\n    budget: {steps: 1000}\n    buffer: {lost_fails: true, relabel_ratio: 0.8}\n"
+        "  - name: second\n    budget: {steps: 1000}\n    buffer: {fresh_targets: true, relabel_ratio: 0.8}\n"
     )
     curriculum = load_curriculum(write(tmp_path, "c.yaml", text))
     assert curriculum.buffer_settings(0) == curriculum.buffer.settings()
     second = curriculum.buffer_settings(1)
-    assert (second.lost_fails, second.relabel_ratio, second.size) == (True, 0.8, 5000)
+    assert (second.fresh_targets, second.relabel_ratio, second.size) == (True, 0.8, 5000)
     assert load_curriculum(write(tmp_path, "d.yaml", curriculum.to_yaml())) == curriculum  # config.yaml round trip
     problem = only_problem(write(tmp_path, "e.yaml", text.replace("relabel_ratio: 0.8", "relabel_ratio: 2")))
     assert (problem.line, problem.path) == (9, "stages[1].buffer.relabel_ratio") and "[0, 1]" in problem.message
-    problem = only_problem(write(tmp_path, "f.yaml", text.replace("lost_fails: true", "size: 100")))
+    problem = only_problem(write(tmp_path, "f.yaml", text.replace("fresh_targets: true", "size: 100")))
     assert problem.path == "stages[1].buffer.size"  # the run's buffer is built once: a stage cannot resize it
 
 
 def test_a_stage_may_change_every_sampling_setting_and_none_that_builds_the_buffer() -> None:
     fields = {f.name for f in dataclasses.fields(BufferSettings)}
-    assert set(STAGE_BUFFER_KEYS) == fields - {"size", "relabel_chains"}
-
-
-def test_a_second_mistake_needs_mistake_starts_and_chains(tmp_path: Path) -> None:
-    text = MINIMAL + "    env: {objects: 3, correction_rate: 1, mistake_start: 0.5, second_mistake: 0.5}\n"
-    problem = only_problem(write(tmp_path, "c.yaml", text))
-    assert (problem.line, problem.path) == (6, "stages[0].env") and "max_corrections 2 (got 1)" in problem.message
-    stage = load_curriculum(write(tmp_path, "ok.yaml", text.replace("objects: 3", "objects: 3, max_corrections: 2"))).stages[0]
-    assert stage.env.settings().second_mistake == 0.5
+    assert set(STAGE_BUFFER_KEYS) == fields - {"size"}
 
 
 def test_common_ground_needs_rare_words(tmp_path: Path) -> None:
@@ -256,14 +246,6 @@ def test_duplicate_stage_names(tmp_path: Path) -> None:
     problem = only_problem(write(tmp_path, "c.yaml", text))
     assert (problem.line, problem.path) == (3, "stages")
     assert "stages[0] and stages[2] are both named 'first'" in problem.message
-
-
-def test_relabelled_chains_need_a_stage_that_speaks_chains(tmp_path: Path) -> None:
-    text = MINIMAL.replace("stages:", "buffer: {relabel_chains: true}\nstages:")
-    problem = only_problem(write(tmp_path, "c.yaml", text))
-    assert problem.path == "stages" and "give a stage max_corrections: 2" in problem.message
-    chains = load_curriculum(write(tmp_path, "d.yaml", text + "    env: {objects: 3, max_corrections: 2}\n"))
-    assert chains.buffer.relabel_chains and chains.max_corrections == 2
 
 
 def test_stage_name_must_be_usable_as_a_folder(tmp_path: Path) -> None:
@@ -520,15 +502,6 @@ def test_buffer_and_loop_settings_have_their_own_keys(tmp_path: Path) -> None:
     assert curriculum.buffer.settings() == BufferSettings(size=5000) and curriculum.updates_per_step == 2
     problem = only_problem(write(tmp_path, "bad.yaml", MINIMAL + "buffer:\n  size: 100\n  hindsight_share: 2\n"))
     assert (problem.line, problem.path) == (8, "buffer.hindsight_share")
-
-
-def test_buffer_and_loop_settings_under_agent_are_read_with_a_warning(tmp_path: Path) -> None:
-    """Curricula, and the config.yaml of runs, written when these settings were the agent's still load."""
-    text = MINIMAL + "agent: {critics: 2, buffer_size: 5000, updates_per_step: 2, hindsight_share: 0.3}\n"
-    with pytest.warns(FutureWarning, match="buffer_size, updates_per_step, hindsight_share"):
-        curriculum = load_curriculum(write(tmp_path, "c.yaml", text))
-    assert curriculum.buffer.settings() == BufferSettings(size=5000, hindsight_share=0.3)
-    assert curriculum.updates_per_step == 2 and curriculum.agent.settings() == SACSettings(critics=2)
 
 
 def test_reading_curricula_loads_neither_torch_nor_pybullet() -> None:

@@ -59,8 +59,7 @@ def test_episode_limit_and_evaluation_view() -> None:
     assert EnvSettings().episode_limit == PLAIN_LIMIT
     assert EnvSettings(correction_rate=0.5).episode_limit == CORRECTION_LIMIT
     assert EnvSettings(correction_rate=0.5, max_episode_steps=30).episode_limit == 30
-    training = EnvSettings(objects=3, max_corrections=2, random_start=0.5, object_start=0.25, mistake_start=0.5,
-                           second_mistake=0.5)
+    training = EnvSettings(objects=3, max_corrections=2, random_start=0.5, object_start=0.25, mistake_start=0.5)
     assert training.for_evaluation() == EnvSettings(objects=3, max_corrections=2)
     assert training.for_evaluation(correction_rate=1.0) == EnvSettings(objects=3, max_corrections=2)  # none to raise
     corrections = EnvSettings(correction_rate=0.5, random_start=0.5)

@@ -52,16 +52,6 @@ def test_reach_on_one_object_ignores_another_knocked_away() -> None:
     assert achieved.tolist() == [True, False, False]
 
 
-def test_an_object_is_lost_to_every_task_once_fallen_and_to_reach_once_knocked_away() -> None:
-    moved = np.zeros_like(STARTS)
-    moved[0, 0] = REACH_STILL * 0.9
-    moved[1, 0] = REACH_STILL * 1.1
-    moved[2, 2] = -0.2  # off the table
-    assert Reach().lost(view(moved)).tolist() == [False, True, True]
-    for task in (Push(), Grasp(), Lift()):
-        assert task.lost(view(moved)).tolist() == [False, False, True]
-
-
 def test_push_needs_the_episode_distance_without_lifting() -> None:
     push = Push()
     push.reset(np.random.default_rng(0))

@@ -62,7 +62,7 @@ def test_a_variant_that_judges_its_last_stage_otherwise_branches_there(tmp_path:
 
 
 def test_a_variant_that_samples_its_last_stage_otherwise_branches_there(tmp_path: Path) -> None:
-    path = variant(tiny(tmp_path), tmp_path, THIRD, THIRD + "\n    buffer: {lost_fails: true}")
+    path = variant(tiny(tmp_path), tmp_path, THIRD, THIRD + "\n    buffer: {fresh_targets: true}")
     assert branch_point(load_curriculum(tiny(tmp_path)), load_curriculum(path)) == 2
 
 

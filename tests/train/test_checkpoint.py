@@ -12,7 +12,7 @@ import torch
 from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
 from lanrocli.agent.buffer.transitions import EpisodeData
 from lanrocli.agent.sac import SACAgent
-from lanrocli.agent.settings import BufferSettings, SACSettings
+from lanrocli.agent.settings import SACSettings
 from lanrocli.language import COLOURS, SHAPES, ObjectProps, grammar_vocabulary
 from lanrocli.train.checkpoint import (
     AGENT_FILE,
@@ -25,7 +25,7 @@ from lanrocli.train.checkpoint import (
 )
 from lanrocli.train.errors import CheckpointError
 from lanrocli.train.manifest import MANIFEST_FILE
-from lanrocli.train.trainer import Trainer, TrainSettings, load_policy
+from lanrocli.train.trainer import TrainSettings
 
 VOCABULARY = grammar_vocabulary()
 OBS_DIM, ACTION_DIM = 6, 3
@@ -131,53 +131,18 @@ def test_random_states_survive_json() -> None:
     assert state_from_json(json.loads(json.dumps(state_to_json(state)))) == state
 
 
-def test_checkpoints_that_hold_a_second_copy_of_the_agent_settings_still_load(tmp_path: Path) -> None:
-    """Older versions also wrote the agent's settings to ``state.json``: such checkpoints resume and
-    evaluate, reading the settings from ``agent.pt``, the one copy now written."""
-    agent = SACSettings(hidden_size=16, obs_size=16)
-    trainer = Trainer(TrainSettings(task="reach", learning_starts=10_000, buffer=BufferSettings(size=500)), agent)
-    trainer.run(3)
-    directory = trainer.save(tmp_path / "step-3")
-    trainer.close()
-    (directory / MANIFEST_FILE).unlink()  # older versions wrote none
-    path = directory / STATE_FILE
-    state = json.loads(path.read_text())
-    older = {"train_settings": state.pop("train_settings"), "agent_settings": agent.to_dict(), **state}
-    path.write_text(json.dumps(older, indent=1))
-
-    resumed, _ = Trainer.load(directory)
-    assert resumed.agent.settings == agent and resumed.progress.env_steps == 3
-    resumed.run(5)
-    resumed.close()
-    settings, policy = load_policy(directory)
-    assert settings.task == "reach" and policy.agent.settings == agent
-
-    # Were the second copy read, a different one would change the network and fail to load.
-    path.write_text(json.dumps({**older, "agent_settings": {**agent.to_dict(), "hidden_size": 32}}))
-    assert Trainer.load(directory)[0].agent.settings == agent
-    assert load_policy(directory)[1].agent.settings == agent
 
 
-def test_checkpoints_whose_agent_held_the_buffer_and_loop_settings_still_load(tmp_path: Path) -> None:
-    """Older versions kept the buffer's and the loop's settings among the agent's: a resumed run reads them
-    from there, and the agent loads without them."""
-    trainer = Trainer(TrainSettings(task="reach", learning_starts=10_000), SACSettings(hidden_size=16, obs_size=16))
-    trainer.run(3)
-    directory = trainer.save(tmp_path / "step-3")
-    trainer.close()
-    (directory / MANIFEST_FILE).unlink()  # older versions wrote none
-    agent_state = torch.load(directory / AGENT_FILE, weights_only=True)
-    old = {"buffer_size": 700, "updates_per_step": 2, "relabel_ratio": 0.6, "relabel_corrections": False,
-           "correction_share": 0.5, "hindsight_share": 0.25}
-    agent_state["settings"] = {**agent_state["settings"], **old}
-    torch.save(agent_state, directory / AGENT_FILE)
-    state = json.loads((directory / STATE_FILE).read_text())
-    train = state["train_settings"]
-    del train["buffer"], train["updates_per_step"]
-    (directory / STATE_FILE).write_text(json.dumps(state))
+def test_a_checkpoint_without_its_manifest_is_refused(tmp_path: Path) -> None:
+    directory = save_checkpoint(tmp_path / "step-1", contents())
+    (directory / MANIFEST_FILE).unlink()
+    with pytest.raises(CheckpointError, match="manifest.json is missing"):
+        load_checkpoint(directory)
 
-    resumed, _ = Trainer.load(directory)
-    expected = BufferSettings(size=700, relabel_ratio=0.6, relabel_corrections=False, hindsight_share=0.25)
-    assert resumed.settings.buffer == expected and resumed.settings.updates_per_step == 2
-    assert resumed.agent.settings == SACSettings(hidden_size=16, obs_size=16)
-    resumed.close()
+
+def test_settings_lanro_no_longer_has_load_only_at_the_value_it_now_always_uses() -> None:
+    saved = TrainSettings(task="reach").to_dict()
+    retired = {**saved, "buffer": {**saved["buffer"], "n_step": 1}, "env": {**saved["env"], "scripted_recovery": 0.0}}
+    assert TrainSettings.from_dict(retired) == TrainSettings(task="reach")
+    with pytest.raises(ValueError, match="buffer.n_step: 3"):
+        TrainSettings.from_dict({**saved, "buffer": {**saved["buffer"], "n_step": 3}})

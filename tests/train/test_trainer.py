@@ -109,13 +109,11 @@ def test_sentences_have_room_for_the_longest_chain_of_corrections_from_the_first
 
 LEVERS = (
     dataclasses.replace(
-        SETTINGS,
-        env=dataclasses.replace(SETTINGS.env, scripted_recovery=0.5),
-        buffer=BufferSettings(size=5000, relabel_negations=True, fresh_targets=True, ground_real=True, falls_fail=True),
+        SETTINGS, buffer=BufferSettings(size=5000, relabel_negations=True, fresh_targets=True, ground_real=True)
     ),
     SACSettings(batch_size=32, architecture="objects", sentence_in_trunk=False, see_rest=True),
 )
-"""The correction levers the curricula use, and the rest of them: they change what is stored and sampled."""
+"""The correction levers the curricula use: they change what is stored and sampled."""
 
 
 @pytest.mark.slow
@@ -153,12 +151,12 @@ def test_entering_a_stage_changes_the_environments_and_keeps_the_learning() -> N
     trainer = Trainer(settings, AGENT)
     trainer.run(60)
     updates, stored = trainer.progress.updates, trainer.buffer.size
-    buffer = dataclasses.replace(settings.buffer, lost_fails=True)
+    buffer = dataclasses.replace(settings.buffer, fresh_targets=True)
     trainer.enter_stage(EnvSettings(objects=3, correction_rate=0.5, negations=True), 1, 4, None, buffer)
     trainer.run(200)
     trainer.close()
     assert trainer.progress.updates > updates and trainer.buffer.size > stored and trainer.buffer.negations
-    assert trainer.settings.buffer.lost_fails  # the stage's sampling, saved with the trainer's settings
+    assert trainer.settings.buffer.fresh_targets  # the stage's sampling, saved with the trainer's settings
     # The stage's limit: correction episodes get 100 steps.
     assert trainer.evaluate(first_seed=0, episodes=1).results[0].length <= 100
     three = trainer.buffer.data["objects"][: trainer.buffer.high, 2, 0] != 255

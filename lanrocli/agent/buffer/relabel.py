@@ -13,10 +13,6 @@ agent that an ambiguous sentence means one particular object. Two styles:
   an object the instruction named ("push the red cube not the red cube": an instruction correction) and of
   one it never named ("push the blue cube not the red cube": the arm's own mistake) included.
 
-Where the arm acted on two objects other than the target and the run speaks chains of corrections, a
-*chained* sentence corrects it once for each, in the order it acted on them, each correction singling out
-the target among the candidates not ruled out yet: the instructor's rule for a chain.
-
 The buffer draws a few of each per object (and, for corrections, per touched object) when an episode is
 added, so that relabelling at sample time is only array indexing.
 """
@@ -47,13 +43,9 @@ from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 
 _DRAWS_PER_OPENING = 4
 """Uniform numbers an opening instruction's choices need (verb, kind, named object, phrase)."""
-_DRAWS_PER_CORRECTION = 3
-"""Uniform numbers a correction's choices need (form, beginning words, phrase)."""
-
-
-def _draws(corrections: int) -> int:
-    """Uniform numbers a sentence with up to ``corrections`` corrections needs, drawn at once."""
-    return _DRAWS_PER_OPENING + _DRAWS_PER_CORRECTION * corrections
+_DRAWS = _DRAWS_PER_OPENING + 3
+"""Uniform numbers a sentence's choices need, drawn at once: the opening's, then the correction's (form,
+beginning words, phrase)."""
 
 
 def _pick(items: Sequence, u: float):  # type: ignore[no-untyped-def]
@@ -82,16 +74,14 @@ class _Scene:
             opening_phrases(kind, self.objects, target, named), None
         ))
 
-    def negations(
-        self, kind: Kind, phrase: Phrase, target: int, touched: int, ruled_out: frozenset[int]
-    ) -> list[Phrase]:
-        return self._get(("not", kind, phrase, target, touched, ruled_out), lambda: self.holdout.correction_phrases(
-            negation_phrases(self.objects, target, touched, candidates(kind, phrase, self.objects) - ruled_out), None
+    def negations(self, kind: Kind, phrase: Phrase, target: int, touched: int) -> list[Phrase]:
+        return self._get(("not", kind, phrase, target, touched), lambda: self.holdout.correction_phrases(
+            negation_phrases(self.objects, target, touched, candidates(kind, phrase, self.objects)), None
         ))
 
-    def naming(self, kind: Kind, phrase: Phrase, target: int, ruled_out: frozenset[int]) -> list[Phrase]:
-        return self._get(("name", kind, phrase, target, ruled_out), lambda: self.holdout.correction_phrases(
-            naming_phrases(self.objects, target, candidates(kind, phrase, self.objects) - ruled_out), None
+    def naming(self, kind: Kind, phrase: Phrase, target: int) -> list[Phrase]:
+        return self._get(("name", kind, phrase, target), lambda: self.holdout.correction_phrases(
+            naming_phrases(self.objects, target, candidates(kind, phrase, self.objects)), None
         ))
 
     def _get(self, key: tuple, compute) -> list[Phrase]:  # type: ignore[no-untyped-def]
@@ -106,13 +96,12 @@ def plain_sentence(verbs: Sequence[str], scene: _Scene, target: int, u: np.ndarr
 
 
 def corrected_sentence(
-    verbs: Sequence[str], scene: _Scene, target: int, touched: Sequence[int], negations: bool, u: np.ndarray
+    verbs: Sequence[str], scene: _Scene, target: int, touched: int, negations: bool, u: np.ndarray
 ) -> str:
-    """An opening instruction and the corrections the instructor would speak after the arm acted on each
-    object of ``touched`` in turn, chosen by the draws ``u`` (``_draws(len(touched))`` of them): the kind
-    uniformly among those the scene allows, then each correction as the instructor chooses it (a negation
-    where one singles out the target among the candidates not ruled out by an earlier correction, else an
-    excuse or an edit)."""
+    """An opening instruction and the correction the instructor would speak after the arm acted on
+    ``touched``, chosen by the draws ``u`` (``_DRAWS`` of them): the kind uniformly among those the scene
+    allows, then the correction as the instructor chooses it (a negation where one singles out the target,
+    else an excuse or an edit)."""
     others = [i for i in range(len(scene.objects)) if i != target and scene.identifying(i)]
     kinds = [k for k in (Kind.AMBIGUITY, Kind.COMMON_GROUND) if scene.openings(k, target, None)]
     kinds += [Kind.INSTRUCTION_CORRECTION] if others else []
@@ -121,31 +110,21 @@ def corrected_sentence(
     named = _pick(others, u[2]) if kind is Kind.INSTRUCTION_CORRECTION else None
     phrase = _pick(scene.openings(kind, target, named), u[3])
     text = instruction(_pick(verbs, u[0]), phrase)
-    for index, wrong in enumerate(touched):
-        v = u[_DRAWS_PER_OPENING + _DRAWS_PER_CORRECTION * index :]
-        text = extend(text, _correction(scene, kind, phrase, target, wrong, frozenset(touched[:index]), negations, v))
-    return text
+    return extend(text, _correction(scene, kind, phrase, target, touched, negations, u[_DRAWS_PER_OPENING:]))
 
 
 def _correction(
-    scene: _Scene,
-    kind: Kind,
-    phrase: Phrase,
-    target: int,
-    touched: int,
-    ruled_out: frozenset[int],
-    negations: bool,
-    v: np.ndarray,
+    scene: _Scene, kind: Kind, phrase: Phrase, target: int, touched: int, negations: bool, v: np.ndarray
 ) -> str:
-    """One correction after the arm acted on ``touched``, singling out ``target`` among the candidates
-    that ``ruled_out`` leaves, chosen by the draws ``v`` (form, beginning words, phrase)."""
+    """One correction after the arm acted on ``touched``, singling out ``target``, chosen by the draws ``v``
+    (form, beginning words, phrase)."""
     form = _pick(correction_forms(negations), v[0])
     if form is CorrectionForm.NEGATION:
-        negated = scene.negations(kind, phrase, target, touched, ruled_out)
+        negated = scene.negations(kind, phrase, target, touched)
         if negated:
             return correction(BEGINNING_WORDS[form][0], _pick(negated, v[2]))
         form = _pick(NAMING_FORMS, v[1])
-    return correction(_pick(BEGINNING_WORDS[form], v[1]), _pick(scene.naming(kind, phrase, target, ruled_out), v[2]))
+    return correction(_pick(BEGINNING_WORDS[form], v[1]), _pick(scene.naming(kind, phrase, target), v[2]))
 
 
 @dataclass(frozen=True)
@@ -153,9 +132,7 @@ class SentencePool:
     """Relabelling sentences for one episode, as token ids.
 
     ``plain``: uint8 [rows, n_objects, L], by target. ``corrected``: uint8 [rows, n_objects, n_objects, L],
-    by target and touched object (padding where the two are one); where the pool was drawn with chains and
-    the episode's arm acted on two other objects, the entry of the one it acted on first holds the chain
-    (relabelling reads only that entry for such a target). ``identifiable``: bool [n_objects]; where it is
+    by target and touched object (padding where the two are one). ``identifiable``: bool [n_objects]; where it is
     false (an object with an identical twin) no sentence can name the object and its rows are padding.
     """
 
@@ -172,15 +149,10 @@ def sentence_pool(
     negations: bool,
     rng: np.random.Generator,
     holdout: Holdout = NOTHING_HELD_OUT,
-    chain: int = 1,
-    acted_on: Sequence[int] = (),
 ) -> SentencePool:
     """``rows`` plain sentences for every identifiable object of the scene, and ``rows`` corrected ones for
     every pair of an identifiable target and another object the arm may have acted on first; none of them
-    says a word ``holdout`` keeps out of training. With ``chain`` above 1, a target for which the episode's
-    arm acted on two other objects or more gets chains of up to ``chain`` corrections instead, one for each
-    of them in turn: ``acted_on`` lists the objects it acted on, in the order it first did. With ``chain``
-    1 nothing more is drawn: the pool is the one drawn before chains existed."""
+    says a word ``holdout`` keeps out of training."""
     verbs = TASK_VERBS[task]
     n = len(objects)
     scene = _Scene(objects, holdout)
@@ -188,15 +160,10 @@ def sentence_pool(
     corrected = np.zeros((rows, n, n, vocabulary.max_length), dtype=np.uint8)
     identifiable = np.array([bool(scene.identifying(k)) for k in range(n)], dtype=bool)
     for k in np.flatnonzero(identifiable):
-        draws = rng.random((rows, n, _draws(1)))
+        draws = rng.random((rows, n, _DRAWS))
         plain[:, k] = vocabulary.encode_many(plain_sentence(verbs, scene, k, u) for u in draws[:, k])
         for j in range(n):
             if j != k:
-                texts = (corrected_sentence(verbs, scene, k, [j], negations, u) for u in draws[:, j])
+                texts = (corrected_sentence(verbs, scene, k, j, negations, u) for u in draws[:, j])
                 corrected[:, k, j] = vocabulary.encode_many(texts)
-        wrong = [int(i) for i in acted_on if i != k][:chain]
-        if len(wrong) > 1:
-            chain_draws = rng.random((rows, _draws(len(wrong))))
-            texts = (corrected_sentence(verbs, scene, k, wrong, negations, u) for u in chain_draws)
-            corrected[:, k, wrong[0]] = vocabulary.encode_many(texts)
     return SentencePool(plain, corrected, identifiable)

@@ -14,22 +14,20 @@ Sampling then needs only vectorised indexing.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
 from lanrocli.agent.buffer.relabel import sentence_pool
-from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.agent.buffer.sampling import sampled_batch
 from lanrocli.agent.buffer.transitions import NEVER, NO_OBJECT, Batch, EpisodeData, stored_arrays
+from lanrocli.agent.settings import BufferSettings
 from lanrocli.language import TASKS, Vocabulary, check_task, grammar_vocabulary
+from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 
 _FORMAT = 3
-"""1: corrected sentences by target only, and no ``names_goal`` or ``first_achieved``; 2: no ``lost``. Both
-still read."""
-
-
+"""The version of :meth:`ReplayBuffer.state`'s layout, which :meth:`ReplayBuffer.from_state` checks."""
 
 
 class ReplayBuffer:
@@ -37,9 +35,7 @@ class ReplayBuffer:
 
     ``pool_rows``: relabelling sentences drawn per object and style when an episode is added (fewer for
     episodes shorter than that, as the pool is stored in the episode's own slots). ``negations``: whether
-    corrected relabelling sentences may use ``not``; ``holdout``: what they may never say; ``chain``: the
-    most corrections a relabelled sentence may chain, where the arm acted on several wrong objects (1: one
-    correction, as without chains). ``seed`` drives those draws; the generator's state is saved with the
+    corrected relabelling sentences may use ``not``; ``holdout``: what they may never say. ``seed`` drives those draws; the generator's state is saved with the
     buffer so a resumed run draws the same sentences.
 
     The arrays are allocated with ``np.zeros``, which the operating system backs with memory only as slots
@@ -57,7 +53,6 @@ class ReplayBuffer:
         negations: bool = True,
         seed: int = 0,
         holdout: Holdout = NOTHING_HELD_OUT,
-        chain: int = 1,
     ) -> None:
         vocabulary = vocabulary if vocabulary is not None else grammar_vocabulary()
         if len(vocabulary) > np.iinfo(np.uint8).max + 1:
@@ -72,7 +67,6 @@ class ReplayBuffer:
         self.pool_rows = pool_rows
         self.negations = negations
         self.holdout = holdout
-        self.chain = chain
         self.rng = np.random.default_rng(seed)
         self.position = 0  # next slot to write
         self.high = 0  # one past the highest slot ever written: samples are drawn below it
@@ -114,10 +108,6 @@ class ReplayBuffer:
         d["action"][lo:hi] = episode.actions
         d["reward"][lo:hi] = episode.rewards
         d["terminated"][lo:hi] = episode.terminated
-        d["fell"][lo:hi] = False if episode.fell is None else episode.fell
-        d["lost"][lo:hi] = False
-        if episode.lost is not None:
-            d["lost"][lo:hi, :n] = episode.lost
         d["instruction"][lo:hi] = episode.instructions
         d["next_instruction"][lo:hi] = episode.next_instructions
         d["achieved"][lo:hi] = False
@@ -135,10 +125,7 @@ class ReplayBuffer:
         d["episode_length"][lo:hi] = steps
 
         rows = min(steps, self.pool_rows)
-        acted_on = [int(i) for i in np.argsort(d["first_achieved"][lo, :n], kind="stable") if ever[i]]
-        pool = sentence_pool(
-            episode.task, objects, rows, self.vocabulary, self.negations, self.rng, self.holdout, self.chain, acted_on
-        )
+        pool = sentence_pool(episode.task, objects, rows, self.vocabulary, self.negations, self.rng, self.holdout)
         d["identifiable"][lo:hi] = False
         d["identifiable"][lo:hi, :n] = pool.identifiable
         d["plain_pool"][lo:hi] = 0
@@ -198,24 +185,10 @@ class ReplayBuffer:
 
     # -- sampling ------------------------------------------------------------------------------------------
 
-    def sample(
-        self,
-        batch_size: int,
-        rng: np.random.Generator,
-        relabel_ratio: float = 0.0,
-        correction_share: float = 0.0,
-        hindsight_share: float = 0.0,
-        n_step: int = 1,
-        gamma: float = 1.0,
-        fresh_targets: bool = False,
-        ground_real: bool = False,
-        falls_fail: bool = False,
-        lost_fails: bool = False,
-        knock_cost: float = 0.0,
-    ) -> Batch:
-        """``batch_size`` transitions drawn with replacement: a share ``hindsight_share`` (binomially) from
-        the transitions whose episode achieves the task on an identifiable object at that step or later, the
-        rest uniformly from all stored ones.
+    def sample(self, batch_size: int, rng: np.random.Generator, settings: BufferSettings) -> Batch:
+        """``batch_size`` transitions drawn with replacement: a share ``settings.hindsight_share`` (binomially)
+        from the transitions whose episode achieves the task on an identifiable object at that step or later,
+        the rest uniformly from all stored ones. The settings' other fields say how they are relabelled:
 
         With probability ``relabel_ratio`` a transition whose episode later achieves the task on an
         identifiable object gets a sentence for such an object: a step t' is drawn uniformly among the
@@ -223,33 +196,18 @@ class ReplayBuffer:
         and done flag are recomputed from the stored ``achieved`` flags at step t. With ``fresh_targets``
         only objects the task did not already hold for before step t are targets (a target that holds
         already makes a transition that is won whatever the action); a transition left without one keeps
-        its own sentence. A share ``correction_share`` of the relabelled sentences are corrections rather
+        its own sentence. A share ``corrected_share`` of the relabelled sentences are corrections rather
         than plain instructions: those written for the object the arm acted on first in the episode,
-        other than the target (where there is none, another object drawn uniformly), or, in a buffer that
-        relabels chains and where the arm acted on a second wrong object too, a correction of each.
+        other than the target (where there is none, another object drawn uniformly).
 
         ``ground_real``: a stored transition whose sentence singles out its goal (every step of a plain
         episode, and the steps after the correction of a correction episode) is labelled with the goal
         for the attention loss; one whose correction is still pending never is.
-
-        ``falls_fail``: a transition whose last step dropped an object off the table, where its goal is
-        not won at that step, is ``failed`` and ``done``: the environment ends such an episode, and the
-        learner is to value what follows as failure for ever, not as the time limit it otherwise resembles.
-        ``lost_fails``: likewise where the transition's last step left the object its sentence is about (the
-        goal, or the relabelled target) where the task can no longer hold for it (``TaskDefinition.lost``),
-        and did not win. ``knock_cost``: subtracted from the reward for each step that leaves an object lost.
-
-        With ``n_step`` above 1 each transition spans up to ``n_step`` stored steps of its episode (fewer where
-        the episode ends first, or where its goal, the relabelled one included, is achieved first): see
-        :mod:`lanrocli.agent.buffer.sampling`; ``gamma`` discounts the rewards along the way.
         """
         if self.size == 0:
             raise ValueError("cannot sample from an empty replay buffer")
-        if n_step < 1:
-            raise ValueError(f"n_step must be at least 1, got {n_step}")
-        idx = self._draw(batch_size, rng, hindsight_share)
-        return sampled_batch(self.data, idx, rng, self.pool_rows, relabel_ratio, correction_share, n_step, gamma,
-                             fresh_targets, ground_real, falls_fail, lost_fails, knock_cost)
+        idx = self._draw(batch_size, rng, settings.hindsight_share)
+        return sampled_batch(self.data, idx, rng, self.pool_rows, settings)
 
     def _draw(self, batch_size: int, rng: np.random.Generator, hindsight_share: float) -> np.ndarray:
         if hindsight_share == 0.0:
@@ -287,7 +245,6 @@ class ReplayBuffer:
             "pool_rows": self.pool_rows,
             "negations": self.negations,
             "holdout": self.holdout.to_dict(),
-            "chain": self.chain,
             "position": self.position,
             "high": self.high,
             "size": self.size,
@@ -300,7 +257,7 @@ class ReplayBuffer:
     def from_state(cls, meta: Mapping[str, Any], arrays: Mapping[str, np.ndarray]) -> ReplayBuffer:
         """The buffer that :meth:`state` described. ``arrays`` may hold more than the buffer's arrays, and
         may be an open ``np.load`` archive, which then reads each array only as it is copied in."""
-        if meta["format"] not in (1, 2, _FORMAT):
+        if meta["format"] != _FORMAT:
             raise ValueError(f"replay buffer file format {meta['format']} is not {_FORMAT}")
         buffer = cls(
             capacity=meta["capacity"],
@@ -310,16 +267,11 @@ class ReplayBuffer:
             vocabulary=Vocabulary.from_dict(meta["vocabulary"]),
             pool_rows=meta["pool_rows"],
             negations=meta["negations"],
-            holdout=Holdout.from_dict(meta.get("holdout")),
-            chain=meta.get("chain", 1),
+            holdout=Holdout.from_dict(meta["holdout"]),
         )
         high = meta["high"]
-        missing = {name: fill for since, added in _ADDED.items() if meta["format"] < since for name, fill in added.items()}
         for name, array in buffer.data.items():
-            if name in missing:
-                missing[name](array[:high], arrays)
-            else:
-                array[:high] = arrays[name]
+            array[:high] = arrays[name]
         buffer.rng.bit_generator.state = meta["rng"]
         buffer.position = meta["position"]
         buffer.high = high
@@ -327,23 +279,3 @@ class ReplayBuffer:
         buffer.episodes_added = meta["episodes_added"]
         return buffer
 
-
-def _read_pool_of_format_1(array: np.ndarray, arrays: Mapping[str, np.ndarray]) -> None:
-    """Format 1 drew one corrected sentence per target: it serves every touched object."""
-    array[:] = np.asarray(arrays["corrected_pool"])[:, :, None, :]
-
-
-_Fill = Callable[[np.ndarray, Mapping[str, np.ndarray]], None]
-
-_ADDED: dict[int, dict[str, _Fill]] = {
-    2: {
-        "corrected_pool": _read_pool_of_format_1,
-        # What format 1 did not record reads as not known: no real transition is labelled for the attention,
-        # and relabelled corrections draw the touched object uniformly.
-        "names_goal": lambda array, _: array.fill(False),
-        "fell": lambda array, _: array.fill(False),
-        "first_achieved": lambda array, _: array.fill(NEVER),
-    },
-    3: {"lost": lambda array, _: array.fill(False)},
-}
-"""By the format that added them, the arrays an older file lacks and how each is filled in when read."""

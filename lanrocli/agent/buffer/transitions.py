@@ -39,8 +39,6 @@ class EpisodeData:
     goal_index: int
     objects: tuple[ObjectProps, ...]
     task: str
-    fell: np.ndarray | None = None  # bool [T]: step t ended the episode by dropping an object; None: never
-    lost: np.ndarray | None = None  # bool [T, n_objects]: after step t the task can no longer hold for it; None: never
     correction_episode: bool = False
     """Whether the instructor set this episode up for a correction: its instruction singles out the goal
     only once the correction is spoken (the environment's ``info["challenge"]`` is not None)."""
@@ -55,15 +53,7 @@ class Batch:
     object slot its new sentence singles out, -1 for the others. ``label``: the object slot the
     transition's sentence singles out where that is known (``named``, and with ``ground_real`` sampling
     the goal of a stored transition whose sentence names it), -1 elsewhere; the attention is taught on
-    it. ``failed``: with ``falls_fail`` sampling, the transition's last step dropped an object off the table
-    without winning, and with ``lost_fails`` sampling it left the object its sentence is about (the goal, or
-    the relabelled target) where the task can no longer hold for it, so the episode is lost for good
-    (``done`` is then set too). ``slots``: where in the
-    buffer each transition is stored, to look up what the batch does not carry.
-
-    ``steps``: how many stored steps each transition spans. With n-step sampling ``reward`` is the return
-    discounted over those steps, ``next_obs`` and ``next_instruction`` are read after the last of them, and
-    the Bellman target discounts its bootstrap by ``gamma ** steps``."""
+    it. ``slots``: where in the buffer each transition is stored, to look up what the batch does not carry."""
 
     obs: np.ndarray  # float32 [B, N]
     instruction: np.ndarray  # int64 [B, L]
@@ -74,9 +64,7 @@ class Batch:
     done: np.ndarray  # bool [B]
     named: np.ndarray  # int64 [B]
     label: np.ndarray  # int64 [B]
-    failed: np.ndarray  # bool [B]
     slots: np.ndarray  # int64 [B]
-    steps: np.ndarray  # int64 [B], 1 for one-step transitions
 
     @property
     def labelled(self) -> bool:
@@ -102,8 +90,6 @@ def stored_arrays(obs_dim: int, action_dim: int, max_objects: int, length: int) 
         "instruction": (np.uint8, (length,)),
         "next_instruction": (np.uint8, (length,)),
         "achieved": (np.bool_, (max_objects,)),
-        "fell": (np.bool_, ()),
-        "lost": (np.bool_, (max_objects,)),  # after this step the task can no longer hold for the object
         "names_goal": (np.bool_, ()),  # the sentence read with obs singles out the goal
         "first_achieved": (np.int32, (max_objects,)),  # the episode's first step achieving each object
         "goal_index": (np.uint8, ()),

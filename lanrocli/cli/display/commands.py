@@ -122,10 +122,6 @@ def env_summary(env: EnvSettings) -> str:
         parts.append(f"starts around an object {env.object_start:g}")
     if env.mistake_start:
         parts.append(f"starts after a mistake {env.mistake_start:g}")
-    if env.second_mistake:
-        parts.append(f"of them after a second {env.second_mistake:g}")
-    if env.scripted_recovery:
-        parts.append(f"scripted recoveries {env.scripted_recovery:g}")
     return ", ".join(parts)
 
 

@@ -11,7 +11,7 @@ from lanrocli.agent.buffer.relabel import sentence_pool
 from lanrocli.core.choices import CorrectionForm
 from lanrocli.language import COLOURS, SHAPES, TASKS, ObjectProps, all_sentences, grammar_vocabulary
 
-from tests.agent.sentences import chain_referents, parse, referents, split_chain
+from tests.agent.sentences import parse, referents
 
 VOCAB = grammar_vocabulary()
 GRAMMAR = {s.text for task in TASKS for s in all_sentences(task, corrections=True, negations=True, rare=True)}
@@ -99,55 +99,3 @@ def test_pools_depend_only_on_the_seed() -> None:
     a = sentence_pool("lift", scene, 8, VOCAB, True, np.random.default_rng(3))
     b = sentence_pool("lift", scene, 8, VOCAB, True, np.random.default_rng(3))
     assert np.array_equal(a.plain, b.plain) and np.array_equal(a.corrected, b.corrected)
-
-
-def test_a_thousand_chained_sentences_are_the_instructors() -> None:
-    # The arm acted on both other objects, in the order drawn, before the target: each relabelled chain
-    # says what the instructor would, a correction per wrong object, each singling out the target among
-    # the objects the corrections before it had not ruled out, for listeners with and without rare words.
-    rng = np.random.default_rng(11)
-    catalogue = [ObjectProps(c, s) for c in COLOURS for s in SHAPES]
-    checked, negated_second = 0, 0
-    while checked < 1000:
-        scene = [catalogue[i] for i in rng.choice(len(catalogue), size=3, replace=False)]
-        task = TASKS[int(rng.integers(len(TASKS)))]
-        acted_on = [int(i) for i in rng.permutation(3)]
-        pool = sentence_pool(task, scene, 4, grammar_vocabulary(2), True, rng, chain=2, acted_on=acted_on)
-        for k in range(3):
-            wrong = [i for i in acted_on if i != k]
-            for row in pool.corrected[:, k, wrong[0]]:
-                text = grammar_vocabulary(2).decode(row)
-                opening, corrections = split_chain(text)
-                assert len(corrections) == 2, text
-                assert all(f"{opening} {spoken}" in GRAMMAR for spoken in corrections), text
-                for knows_rare in (True, False):
-                    assert chain_referents(text, task, scene, wrong, knows_rare) == [[k], [k]], text
-                first = parse(f"{opening} {corrections[0]}", task)
-                if first.beginning is CorrectionForm.NEGATION:
-                    assert first.corrected.fits(scene[wrong[0]]), text
-                second = parse(f"{opening} {corrections[1]}", task)
-                if second.beginning is CorrectionForm.NEGATION:
-                    assert second.corrected.fits(scene[wrong[1]]), text
-                    negated_second += 1
-                checked += 1
-    assert negated_second > 100
-
-
-def test_chains_replace_only_the_entry_relabelling_reads_and_leave_the_rest_as_drawn() -> None:
-    scene = (ObjectProps("red", "cube"), ObjectProps("blue", "cube"), ObjectProps("red", "cylinder"))
-    single = sentence_pool("push", scene, 16, grammar_vocabulary(2), True, np.random.default_rng(4))
-    chained = sentence_pool(
-        "push", scene, 16, grammar_vocabulary(2), True, np.random.default_rng(4), chain=2, acted_on=[2, 0]
-    )
-    assert np.array_equal(chained.plain[:, 0], single.plain[:, 0])
-    assert np.array_equal(chained.corrected[:, 0], single.corrected[:, 0])
-    # Target 1: the arm acted on object 2, then 0; only the entry for touched object 2 becomes the chain.
-    assert not np.array_equal(chained.corrected[:, 1, 2], single.corrected[:, 1, 2])
-    assert all(len(split_chain(grammar_vocabulary(2).decode(row))[1]) == 2 for row in chained.corrected[:, 1, 2])
-    # Targets 0 and 2 had one other object acted on: their corrections stay single.
-    for k in (0, 2):
-        for j in range(3):
-            if j != k:
-                assert all(len(split_chain(grammar_vocabulary(2).decode(r))[1]) == 1 for r in chained.corrected[:, k, j])
-    one = sentence_pool("push", scene, 16, grammar_vocabulary(2), True, np.random.default_rng(4), chain=1, acted_on=[2, 0, 1])
-    assert np.array_equal(one.corrected, single.corrected) and np.array_equal(one.plain, single.plain)
