@@ -1,9 +1,9 @@
 """The losses of one SAC update, as one function of tensors: the algorithm's arithmetic read top to bottom.
 
 :meth:`SACAgent.update <lanrocli.agent.sac.SACAgent.update>` turns a batch into tensors, draws the policy's
-noise and reads the sentences (:func:`~lanrocli.agent.encoder.encode`, whose length-sorted packing changes
-shape from batch to batch); everything after that has the same shapes in every update. So this function can
-be compiled whole (``SACSettings.compile``), forward and backward, while the encoders stay as they are.
+noise and reads the sentences (whose distinct rows and longest length change from batch to batch);
+everything after that has the same shapes in every update. So this function can be compiled whole
+(``SACSettings.compile``), forward and backward, while the encoders stay eager.
 """
 
 from __future__ import annotations
@@ -41,8 +41,6 @@ class SampledTensors(NamedTuple):
     action: torch.Tensor
     reward: torch.Tensor
     done: torch.Tensor
-    steps: torch.Tensor
-    failed: torch.Tensor
     label: torch.Tensor
     noise: torch.Tensor
     next_noise: torch.Tensor
@@ -50,8 +48,7 @@ class SampledTensors(NamedTuple):
 
 class UpdateTensors(NamedTuple):
     """A batch as the losses read it, rows of transitions: observations normalised, ``present`` the object
-    slots that hold objects (None for a flat agent), ``discount`` gamma to the number of steps a transition
-    spans, ``label`` the object its sentence names (-1 where none is known), ``noise`` and ``next_noise``
+    slots that hold objects (None for a flat agent), ``label`` the object its sentence names (-1 where none is known), ``noise`` and ``next_noise``
     the standard normal draws of the policy's actions in this and the next states."""
 
     obs: torch.Tensor
@@ -61,8 +58,6 @@ class UpdateTensors(NamedTuple):
     action: torch.Tensor
     reward: torch.Tensor
     not_done: torch.Tensor
-    discount: torch.Tensor
-    failed: torch.Tensor
     label: torch.Tensor
     noise: torch.Tensor
     next_noise: torch.Tensor
@@ -70,15 +65,14 @@ class UpdateTensors(NamedTuple):
 
 def update_tensors(agent: Learner, sampled: SampledTensors) -> UpdateTensors:
     """The batch as the losses read it: this and the next observations normalised in one pass (row by row
-    alike), flags and step counts as the numbers the losses compute with."""
+    alike), flags as the numbers the losses compute with."""
     f32 = torch.float32
     raw = sampled.observations.to(f32)
     obs, next_obs = agent.normalizer(raw).chunk(2)
     present, next_present = (None, None) if agent.layout is None else agent.layout.present(raw).chunk(2)
     return UpdateTensors(
         obs=obs, present=present, next_obs=next_obs, next_present=next_present, action=sampled.action.to(f32),
-        reward=sampled.reward.to(f32), not_done=1.0 - sampled.done.to(f32), discount=agent.settings.gamma ** sampled.steps.to(f32),
-        failed=sampled.failed.to(f32), label=sampled.label.to(torch.int64), noise=sampled.noise, next_noise=sampled.next_noise,
+        reward=sampled.reward.to(f32), not_done=1.0 - sampled.done.to(f32), label=sampled.label.to(torch.int64), noise=sampled.noise, next_noise=sampled.next_noise,
     )
 
 
@@ -106,9 +100,7 @@ def sac_losses(agent: Learner, summaries: torch.Tensor, batch: UpdateTensors, la
             batch.next_obs, next_actor_language, None, batch.next_present, noise=batch.next_noise
         )
         next_q = agent.target_critic(batch.next_obs, next_target_language, next_action, batch.next_present)
-        target_q = batch.reward + batch.discount * batch.not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
-        # A lost episode (an object dropped) is worth failing for ever.
-        target_q = target_q + batch.discount * batch.failed * (FAILURE_REWARD / (1.0 - s.gamma))
+        target_q = batch.reward + s.gamma * batch.not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
         if s.clip_target:
             target_q = target_q.clamp(FAILURE_REWARD / (1.0 - s.gamma), SUCCESS_REWARD)
     # Object-wise readers weigh the objects once per network: the same attention serves the networks and the
@@ -138,35 +130,19 @@ def sac_losses(agent: Learner, summaries: torch.Tensor, batch: UpdateTensors, la
     return total, torch.stack([metric.detach() for metric in metrics])
 
 
+
+
 Losses = Callable[[Learner, torch.Tensor, UpdateTensors, bool], tuple[torch.Tensor, torch.Tensor]]
 
 
-def compile_problem(device: torch.device) -> str | None:
-    """Why ``SACSettings.compile`` cannot work on ``device`` here, or None. On CPU ``torch.compile`` builds its
-    kernels with a C++ compiler; without one it would fail at a run's first update, after the collection."""
-    if device.type != "cpu":
-        return None
-    from torch._inductor.cpp_builder import get_cpp_compiler
-    from torch._inductor.exc import InvalidCxxCompiler
-
-    try:
-        get_cpp_compiler()
-    except InvalidCxxCompiler as error:
-        return (
-            f"agent.compile: true needs a C++ compiler on CPU, for torch.compile to build its kernels, and none works "
-            f"here ({error}); install one (Debian: apt-get install g++) or set agent.compile: false"
-        )
-    return None
-
-
 def compiled_losses() -> Losses:
-    """:func:`sac_losses` compiled for one agent, which must be the only one ever passed to it.
+    """:func:`sac_losses` compiled by ``torch.compile`` for one agent, which must be the only one ever passed to it.
 
-    Its entries are kept apart from any other agent's (``isolate_recompiles``), and they skip the guards on
-    the networks' modules: an agent's modules never change after it is built (its parameters change in place),
-    and checking all their attributes on every call is a cost the update would pay for nothing. Shapes are fixed (``dynamic=False``): an agent's
-    batches all have the same size; a changed setting (a stage's gamma) or a batch without labels compiles
-    another entry.
+    Shapes are fixed (``dynamic=False``): an agent's batches all have the same size; a changed setting (a
+    stage's gamma) or a batch without labels compiles another entry. Its entries are kept apart from any other
+    agent's (``isolate_recompiles``), and they skip the guards on the networks' modules, which never change
+    after an agent is built (their parameters change in place): checking them on every call would cost the
+    update for nothing.
     """
     return torch.compile(
         sac_losses,

@@ -80,22 +80,19 @@ class SceneReader(nn.Module):
 
     By default the other objects are left out: on the point-mass reach with 2 objects, adding a max-pooled
     summary of all objects kept the agent near 0.3 training success for 20k steps, while the named object
-    alone reached 0.8 within 5k (``benchmarks/point_reach.py``, seed 0). But after a correction the arm is
-    often still at the wrong object, which the named object alone hides: with ``rest`` the reader adds the
-    objects the attention leaves, weighed by how much it leaves each (:attr:`SACSettings.see_rest`).
+    alone reached 0.8 within 5k (``benchmarks/point_reach.py``, seed 0).
 
     ``members`` independent readers run together, one per critic of an ensemble; the output is
-    [members, B, arm + object (+ object)]: the arm's features, then the named object's (then the rest's).
+    [members, B, arm + object]: the arm's features, then the named object's.
     """
 
-    def __init__(self, members: int, layout: ObjectLayout, language_size: int, width: int, rest: bool = False) -> None:
+    def __init__(self, members: int, layout: ObjectLayout, language_size: int, width: int) -> None:
         super().__init__()
         self.layout = layout
         self.key = EnsembleLinear(members, layout.object, width)
         self.query = EnsembleLinear(members, language_size, width)
         self.members = members
-        self.rest = rest
-        self.output_size = layout.arm + layout.object * (2 if rest else 1)
+        self.output_size = layout.arm + layout.object
 
     def scores(self, obs: torch.Tensor, language: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
         """[members, B, slots]: how strongly the sentence points at each object, as logits of the
@@ -119,14 +116,7 @@ class SceneReader(nn.Module):
         arm, objects = self.layout.split(obs)
         weights = (self.scores(obs, language, present) if scores is None else scores).softmax(dim=-1)
         named = (weights.unsqueeze(-1) * objects).sum(dim=-2)
-        if not self.rest:
-            return torch.cat([arm.expand(self.members, -1, -1), named], dim=2)
-        # The objects the attention leaves, weighed by how much it leaves them: the one other object of a
-        # pair, the mean of the others of three; zeros where the named object is alone.
-        left = (1.0 - weights) * present
-        left = left / left.sum(dim=-1, keepdim=True).clamp(min=1e-6)
-        rest = (left.unsqueeze(-1) * objects).sum(dim=-2)
-        return torch.cat([arm.expand(self.members, -1, -1), named, rest], dim=2)
+        return torch.cat([arm.expand(self.members, -1, -1), named], dim=2)
 
 
 def attention_loss(
@@ -174,11 +164,10 @@ class Actor(nn.Module):
         log_std_max: float,
         layout: ObjectLayout | None = None,
         sentence_in_trunk: bool = True,
-        see_rest: bool = False,
     ) -> None:
         super().__init__()
         self.encoder = encoder
-        self.reader = None if layout is None else SceneReader(1, layout, language_size, obs_size, see_rest)
+        self.reader = None if layout is None else SceneReader(1, layout, language_size, obs_size)
         self.obs_layer = nn.Linear(obs_dim if self.reader is None else self.reader.output_size, obs_size)
         self.sentence_in_trunk = sentence_in_trunk
         body_input = obs_size + (language_size if sentence_in_trunk else 0)
@@ -256,11 +245,10 @@ class Critic(nn.Module):
         n_critics: int,
         layout: ObjectLayout | None = None,
         sentence_in_trunk: bool = True,
-        see_rest: bool = False,
     ) -> None:
         super().__init__()
         self.encoder = encoder
-        self.reader = None if layout is None else SceneReader(n_critics, layout, encoder.output_size, obs_size, see_rest)
+        self.reader = None if layout is None else SceneReader(n_critics, layout, encoder.output_size, obs_size)
         obs_input = obs_dim if self.reader is None else self.reader.output_size
         self.obs_layer = EnsembleLinear(n_critics, obs_input, obs_size)
         self.sentence_in_trunk = sentence_in_trunk

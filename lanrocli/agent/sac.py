@@ -1,12 +1,19 @@
 """Soft Actor-Critic for language-conditioned goals. Its settings, the paper's hyperparameters by default,
-live in :mod:`lanrocli.agent.settings`, which needs no torch."""
+live in :mod:`lanrocli.agent.settings`, which needs no torch.
+
+One update, top to bottom: :meth:`SACAgent.learn` samples a batch from the replay buffer, :meth:`SACAgent.update`
+turns it into tensors, reads its sentences with the encoders, computes the losses
+(:func:`~lanrocli.agent.losses.sac_losses`), takes one backward pass and one Adam step, then moves the target
+critic towards the critic.
+"""
 
 from __future__ import annotations
 
 import copy
 import dataclasses
+import logging
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -14,17 +21,16 @@ import torch
 from torch import nn
 
 from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
-from lanrocli.agent.adam import AdamStep
-from lanrocli.agent.encoder import LanguageEncoder, encode
-from lanrocli.agent.noise import restore_generator
-from lanrocli.agent.losses import SampledTensors, compile_problem, compiled_losses, sac_losses, update_tensors
-from lanrocli.agent.networks import Actor, Critic, ObjectLayout
-from lanrocli.agent.normalizer import RunningNormalizer
-from lanrocli.agent.acting import exploit, explore
-from lanrocli.agent.replay import ReplayedActing, ReplayedGradients, replayed_gradients
-from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
 from lanrocli.agent.buffer.transitions import Batch
+from lanrocli.agent.encoder import LanguageEncoder, distinct_sentences
+from lanrocli.agent.losses import Losses, SampledTensors, compiled_losses, sac_losses, update_tensors
+from lanrocli.agent.networks import Actor, Critic, ObjectLayout
+from lanrocli.agent.noise import restore_generator
+from lanrocli.agent.normalizer import RunningNormalizer
+from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
 from lanrocli.core.choices import ActingAttention
+
+logger = logging.getLogger(__name__)
 
 _FORMAT = 1
 
@@ -71,11 +77,11 @@ class SACAgent:
             actor_encoder = None if s.share_encoder else LanguageEncoder(vocab_size, s.embedding_size, s.language_size)
             self.actor = Actor(
                 obs_dim, action_dim, actor_encoder, s.language_size, s.obs_size, s.hidden_size, s.hidden_layers,
-                s.log_std_min, s.log_std_max, self.layout, s.sentence_in_trunk, s.see_rest,
+                s.log_std_min, s.log_std_max, self.layout, s.sentence_in_trunk,
             ).to(self.device)
             self.critic = Critic(
                 obs_dim, action_dim, critic_encoder, s.obs_size, s.hidden_size, s.hidden_layers, s.critics, self.layout,
-                s.sentence_in_trunk, s.see_rest,
+                s.sentence_in_trunk,
             ).to(self.device)
         self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
         # The layout serves the normaliser whatever the architecture: objects share statistics across slots.
@@ -91,20 +97,10 @@ class SACAgent:
             learners.append([self.log_alpha])
         groups = [{"params": params, "lr": lr} for params, lr in zip(learners, self._learning_rates())]
         self.optimizer = torch.optim.Adam(groups, fused=True)
-        self._adam_step = AdamStep(self.optimizer)
-        self._learned = [p for params in learners for p in params]
-        self._polyak_pairs = (list(self.target_critic.parameters()), list(self.critic.parameters()))
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(noise_seed)
         self.updates = 0
-        problem = compile_problem(self.device) if s.compile else None
-        if problem is not None:
-            raise ValueError(problem)
-        self._losses = compiled_losses() if s.compile else sac_losses
-        self._replay: ReplayedGradients | None = None
-        self.update_threads = 1  # the replay's (a training's: replay.update_threads); the same numbers for any
-        self._replay_pending = s.replay and not s.compile  # made at the first update, when its C++ is built
-        self._acting = ReplayedActing(self) if s.replay and not s.compile and self.device.type == "cpu" else None
+        self._compiled: Losses | None = compiled_losses() if s.compile else None
 
     def _learning_rates(self) -> list[float]:
         """Per parameter group of the optimiser: critic, actor, then the temperature when it is tuned."""
@@ -118,39 +114,43 @@ class SACAgent:
         """The encoder the actor reads sentences with: its own, or the critic's when shared."""
         return self.actor.encoder if self.actor.encoder is not None else self.critic.encoder
 
-    def _tensor(self, array: np.ndarray, dtype: torch.dtype) -> torch.Tensor:
-        return torch.as_tensor(np.asarray(array), device=self.device).to(dtype)
-
-    def _acting_inputs(self, obs: Mapping[str, np.ndarray]) -> list[torch.Tensor]:
-        """The raw observations [B, N] and the actor's sentences as :meth:`LanguageEncoder.distinct` reads them."""
-        raw = self._tensor(obs["observation"], torch.float32).reshape(-1, self.obs_dim)
-        return [raw, *self.actor_encoder.distinct(self._tensor(obs["instruction"], torch.int64).reshape(raw.shape[0], -1))]
-
-    def _act(self, function: Callable[..., list[torch.Tensor]], inputs: list[torch.Tensor]) -> list[torch.Tensor]:
-        """``function`` (of :mod:`lanrocli.agent.acting`) of this agent and ``inputs``; replayed, on CPU where the
-        agent replays (``SACSettings.replay``), once its kind and shape of call recurs."""
-        return function(self, *inputs) if self._acting is None else self._acting(function, inputs)
+    def _acting_inputs(self, obs: Mapping[str, np.ndarray]) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
+        """The normalised observations [B, N], which object slots hold objects (None for a flat agent) and the
+        actor's summaries of the sentences [B, size]."""
+        raw = torch.as_tensor(np.asarray(obs["observation"]), device=self.device, dtype=torch.float32)
+        raw = raw.reshape(-1, self.obs_dim)
+        tokens = torch.as_tensor(np.asarray(obs["instruction"]), device=self.device, dtype=torch.int64)
+        present = None if self.layout is None else self.layout.present(raw)
+        return self.normalizer(raw), present, self.actor_encoder(tokens.reshape(raw.shape[0], -1))
 
     @torch.no_grad()
     def act(self, obs: Mapping[str, np.ndarray], deterministic: bool = False) -> np.ndarray:
         """Actions in [-1, 1] for a batch ``{"observation": [B, N], "instruction": [B, L]}`` (or one
         unbatched observation, answered with one unbatched action)."""
-        observation = np.asarray(obs["observation"])
         if deterministic:
-            out = self.act_and_attend(obs)[0]
+            actions = self.act_and_attend(obs)[0]
         else:
-            inputs = self._acting_inputs(obs)
-            noise = torch.randn(inputs[0].shape[0], self.action_dim, generator=self.generator, device=self.device)
-            out = self._act(explore, [*inputs, noise])[0].cpu().numpy()
-        return out[0] if observation.ndim == 1 else out
+            x, present, language = self._acting_inputs(obs)
+            noise = torch.randn(x.shape[0], self.action_dim, generator=self.generator, device=self.device)
+            actions = self.actor.sample(x, language, None, present, noise=noise)[0].cpu().numpy()
+        return actions[0] if np.asarray(obs["observation"]).ndim == 1 else actions
 
     @torch.no_grad()
     def act_and_attend(self, obs: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
         """For a batch as :meth:`act` takes it: the deterministic actions [B, A] and the actor's attention
         over the object slots [B, slots], summing to 1 over the present objects (None for a flat agent),
         both from one reading of the sentences and the objects."""
-        actions, *attention = self._act(exploit, self._acting_inputs(obs))
-        return actions.cpu().numpy(), attention[0].cpu().numpy() if attention else None
+        x, present, language = self._acting_inputs(obs)
+        if self.actor.reader is None:
+            return self.actor.mode(x, language, present).cpu().numpy(), None
+        scores = self.actor.reader.scores(x, language, present)
+        if self.settings.acting_attention == ActingAttention.ARGMAX:
+            # Logits whose softmax is one on each row's highest score: the actor reads that object alone.
+            acting = torch.full_like(scores, torch.finfo(scores.dtype).min).scatter(-1, scores.argmax(-1, keepdim=True), 0.0)
+        else:
+            acting = scores
+        mean, _ = self.actor(x, language, present, acting)
+        return torch.tanh(mean).cpu().numpy(), scores[0].softmax(dim=-1).cpu().numpy()
 
     def act_by(self, attention: ActingAttention) -> None:
         """Read the scene by ``attention`` in deterministic actions from now on (``SACSettings.acting_attention``);
@@ -165,66 +165,56 @@ class SACAgent:
 
     def update(self, batch: Batch) -> dict[str, float]:
         """One SAC update of critic, actor and temperature on ``batch`` (:func:`~lanrocli.agent.losses.sac_losses`),
-        then of the target critic."""
-        sampled, tokens = self._sampled_tensors(batch)
-        metrics = self._gradients(tokens, sampled, batch.labelled)
-        self._step()
+        then of the target critic. All losses are computed from the parameters as they were before the update
+        and touch disjoint parameters, so one backward pass of their sum and one optimiser step serve all."""
+        tokens = torch.as_tensor(np.concatenate([batch.instruction, batch.next_instruction]), device=self.device)
+        sentences, inverse = distinct_sentences(tokens.to(torch.int64))
+        *learning, target = self._update_encoders()
+        with torch.no_grad():
+            target_summaries = target(sentences)[inverse]
+        summaries = torch.stack([*(encoder(sentences)[inverse] for encoder in learning), target_summaries])
+        loss, metrics = self._losses(summaries, update_tensors(self, self._sampled_tensors(batch)), batch.labelled)
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        s = self.settings
+        if s.max_grad_norm is not None:
+            nn.utils.clip_grad_norm_(self.critic.parameters(), s.max_grad_norm)
+            nn.utils.clip_grad_norm_(self.actor.parameters(), s.max_grad_norm)
+        self.optimizer.step()
+        with torch.no_grad():
+            for target, online in zip(self.target_critic.parameters(), self.critic.parameters()):
+                target.lerp_(online, 1.0 - s.polyak)
+        self.updates += 1
         return dict(zip(UPDATE_METRICS, metrics.tolist()))
 
-    def _gradients(self, tokens: torch.Tensor, sampled: SampledTensors, labelled: bool) -> torch.Tensor:
-        """Every learned parameter's gradient of the losses' sum, from one backward pass, in its ``grad``; the
-        update's metrics. Replayed (:mod:`lanrocli.agent.replay`), they are the recorded operations of this."""
-        if self._replay_pending:
-            self._replay_pending = False
-            self._replay = replayed_gradients(self, self._learned, self._update_encoders(), self.device, self.update_threads)
-        if self._replay is not None:
-            gradients, metrics = self._replay(tokens, sampled, labelled)
-            for parameter, gradient in zip(self._learned, gradients):
-                parameter.grad = gradient
-            return metrics
-        # The critic's, the actor's and the target critic's encoders read this and the next sentences (they
-        # nearly always coincide) in one pass.
-        summaries = encode(self._update_encoders(), tokens)
-        loss, metrics = self._losses(self, summaries, update_tensors(self, sampled), labelled)
-        self._backward(loss)
-        return metrics
+    def _losses(self, *inputs: Any) -> tuple[torch.Tensor, torch.Tensor]:
+        """:func:`sac_losses` of this agent, compiled where ``SACSettings.compile`` asks for it and torch can
+        build its kernels here; where it cannot (on CPU without a working C++ compiler, say) the update
+        stays eager, with a warning, rather than a run dying at its first update."""
+        if self._compiled is not None:
+            try:
+                return self._compiled(self, *inputs)
+            except Exception as error:  # noqa: BLE001 - any failure to compile; eager then raises a real error again
+                logger.warning("agent.compile: torch.compile failed here, the update runs eager: %s", error)
+                self._compiled = None
+        return sac_losses(self, *inputs)
 
-    def _backward(self, loss: torch.Tensor) -> None:
-        """Every learned parameter's gradient of ``loss``, from one backward pass, in its ``grad``."""
-        for parameter in self._learned:
-            parameter.grad = None
-        loss.backward()
-
-    def _sampled_tensors(self, batch: Batch) -> tuple[SampledTensors, torch.Tensor]:
-        """The batch as tensors, and its sentences followed by its next sentences (int64 [2B, L])."""
+    def _sampled_tensors(self, batch: Batch) -> SampledTensors:
+        """The batch as tensors, with the policy's noise for the next states and for these, drawn from the
+        agent's own stream, so the losses are a function of tensors alone."""
         def tensor(array: np.ndarray) -> torch.Tensor:
             return torch.as_tensor(array, device=self.device)
 
-        # The policy's noise, the next states' first, from the agent's stream: drawn here, the losses are a
-        # function of tensors alone.
         next_noise, noise = (torch.randn(batch.obs.shape[0], self.action_dim, generator=self.generator, device=self.device) for _ in range(2))
-        sampled = SampledTensors(
+        return SampledTensors(
             observations=tensor(np.concatenate([batch.obs, batch.next_obs])), action=tensor(batch.action),
-            reward=tensor(batch.reward), done=tensor(batch.done), steps=tensor(batch.steps), failed=tensor(batch.failed),
-            label=tensor(batch.label), noise=noise, next_noise=next_noise,
+            reward=tensor(batch.reward), done=tensor(batch.done), label=tensor(batch.label), noise=noise, next_noise=next_noise,
         )
-        return sampled, tensor(np.concatenate([batch.instruction, batch.next_instruction])).to(torch.int64)
 
     def _update_encoders(self) -> list[LanguageEncoder]:
         """The encoders an update reads the sentences with, in the order :func:`sac_losses` takes their
         summaries: the critic's, the actor's own (if it has one), the target critic's."""
         return [self.critic.encoder, *([self.actor.encoder] if self.actor.encoder is not None else []), self.target_critic.encoder]
-
-    def _step(self) -> None:
-        """The optimiser's step on the gradients the parameters hold, then the target critic's."""
-        s = self.settings
-        if s.max_grad_norm is not None:
-            nn.utils.clip_grad_norm_(self.critic.parameters(), s.max_grad_norm)
-            nn.utils.clip_grad_norm_(self.actor.parameters(), s.max_grad_norm)
-        with torch.no_grad():
-            self._adam_step()
-            torch._foreach_lerp_(*self._polyak_pairs, 1.0 - s.polyak)
-        self.updates += 1
 
     def learn(
         self,

@@ -63,10 +63,6 @@ class SACSettings:
     observation. With ``architecture: objects`` and ``False`` the sentence acts through the attention
     alone: it picks the object, and the motor layers see the arm and that object, so a negation or an
     unfamiliar correction cannot disturb how the arm moves, only what it moves to."""
-    see_rest: bool = False
-    """With ``architecture: objects``, the layers after the attention see, beside the named object, the
-    others weighed by how little attention they get. After a correction the arm is often still at the
-    object it wrongly acted on; without this it cannot see that object once the attention leaves it."""
     acting_attention: str = ActingAttention.SOFT.value
     """How a deterministic action (evaluations, and so promotion; tests; ``lanro play``) reads the scene with
     ``architecture: objects``: ``soft``, the attention-weighted mix of the objects that training reads;
@@ -86,20 +82,14 @@ class SACSettings:
     obs_var_eps: float = 1e-4
     """Added to the observation variance: a feature that barely varies is scaled by at most 100."""
     compile: bool = False
-    """Compile the update's losses with ``torch.compile`` (:mod:`lanrocli.agent.losses`): the same arithmetic
-    in fewer, fused operations; compiling when an agent first updates buys faster updates after
-    (docs/performance.md). On CPU it needs a C++ compiler. Fused sums round differently in the last bits, so
-    a run is reproducible with the setting it ran with."""
-
-    replay: bool = True
-    """On CPU, record an update's reading, losses and backward pass once and replay the recorded operations from
-    C++ (:mod:`lanrocli.agent.replay`): the same numbers, bit for bit, faster (docs/performance.md). Python in
-    :func:`~lanrocli.agent.losses.sac_losses` runs only while recording, and a branch on a tensor's value cannot
-    be recorded: turn it off to change and debug the losses."""
+    """Compile the update's losses with ``torch.compile`` (:func:`~lanrocli.agent.losses.compiled_losses`): the
+    same arithmetic in fewer, fused operations, paid for by a compilation when the agent first updates. On CPU
+    torch builds its kernels with a C++ compiler; where none works, the update stays eager and says so. Fused
+    sums round differently in the last bits, so a run is reproducible with the setting it ran with."""
 
     ARCHITECTURE: ClassVar[tuple[str, ...]] = (
         "critics", "embedding_size", "language_size", "obs_size", "hidden_size", "hidden_layers", "architecture",
-        "share_encoder", "autotune_alpha", "sentence_in_trunk", "see_rest",
+        "share_encoder", "autotune_alpha", "sentence_in_trunk",
     )
     """The settings that shape the networks and the optimiser's state: a saved agent loads only into one
     that agrees on them."""
@@ -120,8 +110,6 @@ class SACSettings:
             raise ValueError(f"acting_attention must be {choices}, got {self.acting_attention!r}")
         if self.acting_attention != ActingAttention.SOFT and self.architecture != "objects":
             raise ValueError("acting_attention: argmax needs architecture 'objects': a flat network has no attention")
-        if self.see_rest and self.architecture != "objects":
-            raise ValueError("see_rest: true needs architecture 'objects': a flat network sees every object already")
         if self.grounding < 0.0:
             raise ValueError(f"grounding must not be negative, got {self.grounding}")
         if self.batch_size < 1 or self.hidden_layers < 0:

@@ -22,7 +22,6 @@ import torch
 
 from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
 from lanrocli.agent.networks import ObjectLayout
-from lanrocli.agent.replay import update_threads
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.core.choices import Task, check_device
@@ -207,7 +206,6 @@ class Trainer:
         action_dim = action_size(task_class(settings.task).gripper)
         layout = ObjectLayout(ARM_SIZE, OBJECT_SIZE, settings.slots)
         self.agent = SACAgent(obs_dim, action_dim, len(self.vocabulary), agent_settings, settings.seed, self.device, layout)
-        self.agent.update_threads = update_threads(workers=settings.envs if settings.in_workers else 0)
         self.buffer = ReplayBuffer(
             settings.buffer.size, obs_dim, action_dim,
             max_objects=settings.slots,

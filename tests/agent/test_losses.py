@@ -32,7 +32,7 @@ def test_compiled_losses_give_the_eager_updates_gradients_for_each_agent_in_one_
     labelled = _grounding_batch(rng)
     labelled.label[::3] = -1
     unlabelled = _batch(rng, 128)
-    for settings in ({"architecture": "objects", "critics": 2, "see_rest": True}, {"architecture": "flat", "hidden_layers": 2}):
+    for settings in ({"architecture": "objects", "critics": 2}, {"architecture": "flat", "hidden_layers": 2}):
         eager, compiled = _agent(seed=1, **settings), _agent(seed=1, compile=True, **settings)  # type: ignore[arg-type]
         for agent in (eager, compiled):
             agent.update_normalizer(observations)
@@ -46,10 +46,21 @@ def test_compiled_losses_give_the_eager_updates_gradients_for_each_agent_in_one_
         assert (want_metrics["grounding_loss"] > 0.0) == (settings["architecture"] == "objects")
 
 
-def test_an_agent_that_cannot_compile_its_update_says_so_when_built() -> None:
-    import torch._inductor.config
+def test_an_update_that_cannot_be_compiled_runs_eager_and_says_so(caplog: pytest.LogCaptureFixture) -> None:
+    """Where torch cannot build its kernels (no working C++ compiler on CPU, say), the agent's first update
+    warns and computes what the eager agent computes, rather than a run dying at its first update."""
 
-    with torch._inductor.config.patch({"cpp.cxx": (None, "/nonexistent/g++")}):
-        with pytest.raises(ValueError, match="agent.compile: true needs a C\\+\\+ compiler"):
-            _agent(compile=True)
-    _agent()  # an eager update needs no compiler
+    def fails(*args: object) -> None:
+        raise RuntimeError("no C++ compiler works here")
+
+    rng = np.random.default_rng(0)
+    batch = _grounding_batch(rng)
+    eager, compiled = _agent(seed=1, architecture="objects"), _agent(seed=1, architecture="objects", compile=True)
+    compiled._compiled = fails  # type: ignore[assignment]
+    with caplog.at_level("WARNING", logger="lanrocli.agent.sac"):
+        got_metrics, got = _gradients(compiled, batch)
+    want_metrics, want = _gradients(eager, batch)
+    assert "torch.compile failed" in caplog.text and "no C++ compiler" in caplog.text
+    assert got_metrics == want_metrics
+    assert all(torch.equal(a, b) for a, b in zip(got, want))
+    assert compiled._compiled is None  # later updates do not try again

@@ -1,14 +1,13 @@
-"""The sentence encoder, the squashed-Gaussian actor and the critic ensemble."""
+"""The squashed-Gaussian actor and the critic ensemble."""
 
 from __future__ import annotations
 
 import numpy as np
 import torch
 
-from lanrocli.agent.encoder import LanguageEncoder, _distinct_rows, encode, stacked_gates
-from lanrocli.agent.gru import read_sentences
+from lanrocli.agent.encoder import LanguageEncoder
 from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, ObjectLayout, SceneReader
-from lanrocli.language import PAD_ID, grammar_vocabulary, sample_sentence
+from lanrocli.language import grammar_vocabulary, sample_sentence
 
 VOCAB = grammar_vocabulary()
 
@@ -22,67 +21,6 @@ def _sentences(n: int, seed: int = 0) -> torch.Tensor:
     rng = np.random.default_rng(seed)
     texts = [sample_sentence(rng, "push", corrections=bool(rng.random() < 0.5), negations=True).text for _ in range(n)]
     return torch.as_tensor(VOCAB.encode_many(texts))
-
-
-def test_summary_is_the_gru_state_after_the_last_true_word() -> None:
-    encoder = _encoder()
-    tokens = _sentences(40)
-    with torch.no_grad():
-        summary = encoder(tokens)
-        for row, out in zip(tokens, summary):
-            words = row[row != 0]
-            _, h = encoder.gru(encoder.embedding(words.unsqueeze(0)))
-            torch.testing.assert_close(out, h[0, 0], rtol=1e-5, atol=1e-6)
-
-
-def test_summary_does_not_depend_on_the_padded_length() -> None:
-    encoder = _encoder()
-    tokens = _sentences(30)
-    longer = torch.cat([tokens, torch.zeros(30, 7, dtype=torch.int64)], dim=1)
-    with torch.no_grad():
-        torch.testing.assert_close(encoder(tokens), encoder(longer))
-        # Nor on which other sentences share the batch.
-        torch.testing.assert_close(encoder(tokens[:5]), encoder(tokens)[:5])
-
-
-def test_repeated_sentences_give_the_gradients_of_encoding_every_row() -> None:
-    tokens = _sentences(12)
-    tokens = torch.cat([tokens, tokens[:6], tokens[2:3].repeat(5, 1)])
-    weights = torch.randn(tokens.shape[0], 32)
-    shared, reference = _encoder(), _encoder()
-    (shared(tokens) * weights).sum().backward()
-    (read_sentences(*stacked_gates([reference]), tokens, PAD_ID)[0] * weights).sum().backward()  # every row read
-    for a, b in zip(shared.parameters(), reference.parameters()):
-        torch.testing.assert_close(a.grad, b.grad)
-
-
-def test_distinct_rows_are_torch_uniques_in_its_order() -> None:
-    """Its order decides how sentences are packed for the GRU, and so the last bits of every update: it must
-    be torch.unique's, which it replaces, so that runs keep their numbers."""
-    generator = torch.Generator().manual_seed(0)
-    batches = [_sentences(128, seed=1), torch.zeros(4, 6, dtype=torch.int64)]
-    batches += [torch.randint(0, high, (60, width), generator=generator) for high, width in ((3, 5), (300, 9), (2**40, 2))]
-    for tokens in batches:
-        expected, expected_inverse = torch.unique(tokens, dim=0, return_inverse=True)
-        rows, inverse = _distinct_rows(tokens)
-        assert torch.equal(rows, expected) and torch.equal(inverse, expected_inverse)
-
-
-def test_encoding_together_gives_each_encoders_own_summaries() -> None:
-    first, second = _encoder(0), _encoder(1)
-    tokens = torch.cat([_sentences(20), torch.zeros(2, VOCAB.max_length, dtype=torch.int64)])
-    together = encode([first, second], tokens)
-    torch.testing.assert_close(together[0], first(tokens))
-    torch.testing.assert_close(together[1], second(tokens))
-
-
-def test_an_empty_sentence_reads_nothing() -> None:
-    encoder = _encoder()
-    tokens = torch.zeros(3, VOCAB.max_length, dtype=torch.int64)
-    tokens[1, :4] = torch.as_tensor(VOCAB.encode("push the red cube")[:4])
-    out = encoder(tokens)
-    assert torch.equal(out[0], torch.zeros(32)) and torch.equal(out[2], torch.zeros(32))
-    assert out[1].abs().sum() > 0
 
 
 def _actor() -> Actor:

@@ -118,12 +118,6 @@ def train_command(
         torch_device = pick_device(device)
     except ValueError as error:
         raise fail(str(error)) from None
-    if plan is not None and plan.agent.settings().compile:
-        from lanrocli.agent.losses import compile_problem
-
-        problem = compile_problem(torch_device)
-        if problem is not None:
-            raise fail(problem)
     torch.set_num_threads(1 if torch_device.type == "cpu" else torch.get_num_threads())
     display = TrainingDisplay.for_terminal()
     try:
