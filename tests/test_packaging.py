@@ -20,7 +20,6 @@ SOURCE = ["pyproject.toml", "README.md", "LICENSE", "lanrocli"]
 SHIPPED = [
     "lanrocli/py.typed",
     "lanrocli/language/word_ids.txt",
-    "lanrocli/agent/gru_steps.cpp",
     "lanrocli/curricula/push.yaml",
     *(f"lanrocli/pretrained/push/{name}" for name in ("agent.pt", "state.json", "manifest.json")),
 ]
@@ -66,8 +65,6 @@ def test_the_wheel_installs_and_runs_a_packaged_curriculum_and_agent_from_anywhe
     elsewhere.mkdir()
     imported = run([python, "-c", "import lanrocli; print(lanrocli.__file__)"], elsewhere)
     assert Path(imported.strip()).is_relative_to(venv), imported
-    native = "from lanrocli.agent import native; assert all(native.load(lib) for lib in (native.READING, native.REPLAY))"
-    run([python, "-W", "error", "-c", native], elsewhere)  # the C++ reading and replay build from the wheel's source
     checked = run([venv / "bin" / "lanro", "check", "push"], elsewhere)
     assert "push: push" in checked and "environment steps in all" in checked
     played = run([venv / "bin" / "lanro", "play", "push", "--episodes", "1"], elsewhere, "push the red object\n")

@@ -1,4 +1,6 @@
-"""The package's shape: no module too long to read at once, and no import circle between its modules.
+"""The package's shape: no import circle between its modules, almost nothing at its top level, and layers
+that import only downwards, so that a lower layer (the simulation, the agent) can be read and tested without
+the ones built on it (training, the command line).
 
 The import graph holds the imports a module makes when it is loaded: those at its top level, those under
 ``if TYPE_CHECKING:`` included (a circle there still ties the modules together for a reader and a type
@@ -15,8 +17,26 @@ from pathlib import Path
 import lanrocli
 
 PACKAGE = Path(lanrocli.__file__).parent
-LONGEST = 350
-"""Lines a module may have at most."""
+LAYERS = (
+    "core",
+    "language",
+    "sim",
+    "tasks",
+    "envs",
+    "agent",
+    "config",
+    "evaluation",
+    "train",
+    "report",
+    "sweep",
+    "integrations",
+    "pretrained",
+    "cli",
+)
+"""The package's subpackages from the bottom up: each may import those before it and itself, never one after."""
+TOP_LEVEL_MODULES = 2
+"""Modules the package may have outside its subpackages: ``__init__`` and at most one more, so that every
+other module sits in the layer it belongs to."""
 
 
 def module_name(path: Path, root: Path) -> str:
@@ -88,19 +108,40 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
     return None
 
 
-def too_long(root: Path) -> dict[str, int]:
-    counts = {module_name(path, root): len(path.read_text().splitlines()) for path in root.rglob("*.py")}
-    return {name: count for name, count in counts.items() if count > LONGEST}
+def layer(module: str) -> str | None:
+    """The subpackage ``module`` belongs to (``pkg.sim.world`` is in ``sim``), or None for the package itself."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else None
 
 
-def test_no_module_is_longer_than_the_limit() -> None:
-    assert too_long(PACKAGE) == {}
+def upward_imports(graph: dict[str, set[str]], layers: tuple[str, ...]) -> list[tuple[str, str]]:
+    """The imports of ``graph`` from a module in one layer to a module in a layer above it, sorted."""
+    rank = {name: index for index, name in enumerate(layers)}
+    return sorted(
+        (module, target)
+        for module, targets in graph.items()
+        for target in targets
+        if layer(module) is not None and layer(target) is not None and rank[layer(target)] > rank[layer(module)]
+    )
 
 
 def test_the_modules_import_each_other_without_a_circle() -> None:
     graph = import_graph(PACKAGE)
     assert "lanrocli.train.runfolder" in graph["lanrocli.train.pipeline"]  # the imports are read
     assert find_cycle(graph) is None
+
+
+def test_the_package_keeps_almost_no_modules_at_its_top_level() -> None:
+    assert len(list(PACKAGE.glob("*.py"))) <= TOP_LEVEL_MODULES
+
+
+def test_every_subpackage_has_a_layer() -> None:
+    subpackages = {path.parent.name for path in PACKAGE.glob("*/__init__.py")}
+    assert subpackages == set(LAYERS)
+
+
+def test_each_layer_imports_only_the_layers_below_it() -> None:
+    assert upward_imports(import_graph(PACKAGE), LAYERS) == []
 
 
 def _package(root: Path, modules: dict[str, str]) -> Path:
@@ -112,7 +153,7 @@ def _package(root: Path, modules: dict[str, str]) -> Path:
     return package
 
 
-def test_the_checks_find_a_circle_and_a_long_module(tmp_path: Path) -> None:
+def test_the_checks_find_a_circle(tmp_path: Path) -> None:
     package = _package(
         tmp_path,
         {
@@ -120,12 +161,26 @@ def test_the_checks_find_a_circle_and_a_long_module(tmp_path: Path) -> None:
             "sub/a": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from pkg.sub import b\n",
             "sub/b": "from . import c\n",
             "sub/c": "import pkg.sub.a\n\ndef later():\n    import pkg.d\n",
-            "d": "x = 1\n" * (LONGEST + 1),
+            "d": "x = 1\n",
         },
     )
     graph = import_graph(package)
     assert graph["pkg.sub.c"] == {"pkg.sub.a"}  # the import inside a function is not an edge
     assert find_cycle(graph) == ["pkg.sub.a", "pkg.sub.b", "pkg.sub.c", "pkg.sub.a"]
-    assert too_long(package) == {"pkg.d": LONGEST + 1}
     graph["pkg.sub.c"] = set()
     assert find_cycle(graph) is None
+
+
+def test_the_checks_find_an_upward_import(tmp_path: Path) -> None:
+    package = _package(
+        tmp_path,
+        {
+            "low/__init__": "from pkg.low import base\n",
+            "low/base": "from pkg import high\n\ndef later():\n    from pkg.high import user\n",
+            "high/__init__": "",
+            "high/user": "from ..low import base\nimport pkg\n",
+        },
+    )
+    graph = import_graph(package)
+    assert upward_imports(graph, ("low", "high")) == [("pkg.low.base", "pkg.high")]
+    assert upward_imports(graph, ("high", "low")) == [("pkg.high.user", "pkg.low.base")]

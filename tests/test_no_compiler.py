@@ -1,0 +1,67 @@
+"""lanro on a machine without a C++ compiler: the agent's tests and a quick training run, in processes whose
+``PATH`` finds a ``cc``, ``c++``, ``gcc`` and ``g++`` that all fail. A user's machine may have none, and
+torch.compile then cannot build its kernels: the agent must fall back to eager PyTorch rather than fail, and
+only a run on such a machine shows it, as this one has a compiler."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+COMPILERS = ("cc", "c++", "gcc", "g++")
+
+
+@pytest.fixture
+def no_compiler(tmp_path: Path) -> dict[str, str]:
+    """An environment in which every C++ compiler fails, and with empty build caches, so that nothing built
+    earlier with a working compiler is reused; this checkout first on the import path."""
+    fake = tmp_path / "compilers"
+    fake.mkdir()
+    for name in COMPILERS:
+        script = fake / name
+        script.write_text("#!/bin/sh\nexit 1\n")
+        script.chmod(0o755)
+    caches = tmp_path / "caches"
+    env = {key: value for key, value in os.environ.items() if key not in ("CC", "CXX")}
+    env |= {
+        "PATH": f"{fake}{os.pathsep}{os.environ['PATH']}",
+        "PYTHONPATH": str(ROOT),
+        "TORCHINDUCTOR_CACHE_DIR": str(caches / "inductor"),
+        "TORCH_EXTENSIONS_DIR": str(caches / "extensions"),
+        "TRITON_CACHE_DIR": str(caches / "triton"),
+    }
+    assert all(shutil.which(name, path=env["PATH"]) == str(fake / name) for name in COMPILERS)
+    return env
+
+
+def run(command: list[str], cwd: Path, env: dict[str, str]) -> str:
+    """``command``'s output; fails with it unless the command succeeds."""
+    result = subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True, timeout=1200, check=False)
+    assert result.returncode == 0, f"{command}:\n{result.stdout}\n{result.stderr}"
+    return result.stdout
+
+
+@pytest.mark.slow
+def test_the_agent_and_buffer_tests_pass_without_a_compiler(no_compiler: dict[str, str]) -> None:
+    # One process: this test already runs beside others, and tests/agent holds the buffer's tests too.
+    output = run(
+        [sys.executable, "-m", "pytest", "tests/agent", "-q", "-n", "0", "-p", "no:cacheprovider"], ROOT, no_compiler
+    )
+    assert " passed" in output
+
+
+@pytest.mark.slow
+def test_a_quick_training_runs_without_a_compiler(no_compiler: dict[str, str], tmp_path: Path) -> None:
+    out = tmp_path / "quick"
+    run(
+        [sys.executable, "-c", "from lanrocli.cli.app import app; app()", "train", "--quick", "--out", str(out)],
+        tmp_path,
+        no_compiler,
+    )
+    assert list(out.glob("stage-*/test.json")), "the run saved no stage's test results"
