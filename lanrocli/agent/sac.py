@@ -228,9 +228,8 @@ class SACAgent:
         totals: dict[str, float] = {}
         if n_updates < 1:
             return totals
-        draw = sampling.sampling()
         for _ in range(n_updates):
-            batch = buffer.sample(self.settings.batch_size, rng, **draw, gamma=self.settings.gamma)
+            batch = buffer.sample(self.settings.batch_size, rng, sampling)
             for name, value in self.update(batch).items():
                 totals[name] = totals.get(name, 0.0) + value
         return {name: value / n_updates for name, value in totals.items()}

@@ -13,11 +13,6 @@ from lanrocli.core.choices import ActingAttention
 UPDATE_METRICS = ("critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy")
 """The figures each update of the agent reports, in its order; ``metrics.csv`` has a column for each."""
 
-MOVED = ("buffer_size", "updates_per_step", "relabel_ratio", "relabel_corrections", "correction_share", "hindsight_share")
-"""Settings that agents saved by older versions hold, now ``BufferSettings`` (``buffer_size`` as ``size``)
-and ``TrainSettings.updates_per_step``."""
-
-
 @dataclass(frozen=True)
 class SACSettings:
     """Every number of the agent. Defaults are the paper's (its appendix, table of hyperparameters) where it
@@ -120,10 +115,8 @@ class SACSettings:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> SACSettings:
-        """Settings from plain data. An agent saved by an older version also holds the settings that are now
-        the buffer's and the training loop's (``MOVED``); they are left out here."""
+        """Settings from plain data, refusing names these settings do not have."""
         known = {f.name for f in dataclasses.fields(cls)}
-        data = {key: value for key, value in data.items() if key not in MOVED}
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"unknown SAC settings: {', '.join(unknown)}")

@@ -117,29 +117,11 @@ class TrainSettings:
         return cls(
             **{
                 **data,
-                "env": EnvSettings(**_without_retired("env", data["env"])),
-                "buffer": BufferSettings(**_without_retired("buffer", data.get("buffer", {}))),
+                "env": EnvSettings(**data["env"]),
+                "buffer": BufferSettings(**data["buffer"]),
                 "holdout": Holdout.from_dict(data.get("holdout")),
             }
         )
-
-
-RETIRED: dict[str, dict[str, Any]] = {
-    "buffer": {"relabel_chains": False, "falls_fail": False, "lost_fails": False, "knock_cost": 0.0, "n_step": 1},
-    "env": {"second_mistake": 0.0, "scripted_recovery": 0.0},
-}
-"""Settings that checkpoints of the current format hold (the shipped agents among them) and that lanro no
-longer has, each with the one value that means what lanro now always does."""
-
-
-def _without_retired(section: str, data: Mapping[str, Any]) -> dict[str, Any]:
-    """``data`` without the ``RETIRED`` settings of ``section``; a checkpoint trained with another value of
-    one is refused, since this version cannot train or act as it did."""
-    kept = dict(data)
-    for name, value in RETIRED[section].items():
-        if name in kept and kept.pop(name) != value:
-            raise ValueError(f"trained with {section}.{name}: {data[name]!r}, which lanro no longer has")
-    return kept
 
 
 def pick_device(requested: str | None) -> torch.device:
