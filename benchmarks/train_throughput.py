@@ -14,9 +14,7 @@ are reported, which evens out a shared machine's drift better than one long run 
     python benchmarks/train_throughput.py --steps 2000 --rounds 3 --curriculum reach [--compile]
 
 With ``--compile`` our agent's update is compiled (``SACSettings.compile``); its first update, which compiles, is
-timed apart and left out of the rates. Recording the replayed update and acting (``lanrocli/agent/replay.py``) is
-a cost of the same kind, once per shape of batch in a run: it stays in the rates, and the seconds it took are
-printed with the rate and ratio without them, which is what a long run sees.
+timed apart and left out of the rates, which is what a long run sees.
 """
 
 from __future__ import annotations
@@ -30,7 +28,6 @@ from typing import Any
 
 import torch
 
-from lanrocli.agent import replay
 from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.settings import EnvSettings
@@ -57,16 +54,12 @@ class Stopwatch:
 
 def run_ours(
     steps: int, envs: int, learning_starts: int, seed: int, agent: SACSettings, buffer: BufferSettings, device: str,
-    update_threads: int | None = None,
 ) -> dict[str, float]:
-    """``update_threads``: the replayed update's (``SACAgent.update_threads``), or as a training chooses them."""
     settings = TrainSettings(
         task="reach", env=EnvSettings(objects=2), seed=seed, envs=envs, learning_starts=learning_starts, buffer=buffer
     )
     trainer = Trainer(settings, agent, device=device)
-    if update_threads is not None:
-        trainer.agent.update_threads = update_threads
-    simulation, sampling, updating, recording = Stopwatch(), Stopwatch(), Stopwatch(), Stopwatch()
+    simulation, sampling, updating = Stopwatch(), Stopwatch(), Stopwatch()
     trainer.run(envs)  # start the environments before the clock
     collector = trainer._collector
     assert collector is not None
@@ -84,13 +77,8 @@ def run_ours(
 
         trainer.agent.update = update  # type: ignore[method-assign]
     updates_before = trainer.progress.updates
-    recorded = replay._recorded
-    replay._recorded = recording.wrap(recorded)  # type: ignore[assignment]
     start = time.perf_counter()
-    try:
-        trainer.run(steps)
-    finally:
-        replay._recorded = recorded  # type: ignore[assignment]
+    trainer.run(steps)
     total = time.perf_counter() - start - compiling.seconds
     trainer.close()
     done = steps - envs
@@ -102,8 +90,6 @@ def run_ours(
         "sampling_s": sampling.seconds,
         "update_s": updating.seconds,
         "compile_s": compiling.seconds,
-        "recording_s": recording.seconds,
-        "env_steps_per_s_recorded": done / (total - recording.seconds),
     }
 
 
@@ -140,7 +126,6 @@ def main() -> None:
     parser.add_argument("--envs", type=int, default=2)
     parser.add_argument("--learning-starts", type=int, default=500)
     parser.add_argument("--threads", type=int, default=1, help="torch's threads within an operation (both agents)")
-    parser.add_argument("--update-threads", type=int, help="our replayed update's threads (default: as a training chooses)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--batch-size", type=int, help="of both agents (default: 256, or the curriculum's)")
     parser.add_argument("--architecture", choices=["flat", "objects"], help="of our agent (default: flat)")
@@ -167,16 +152,14 @@ def main() -> None:
 
     rounds = []
     for _ in range(args.rounds):
-        result = run_ours(args.steps, args.envs, args.learning_starts, args.seed, agent, buffer, args.device, args.update_threads)
+        result = run_ours(args.steps, args.envs, args.learning_starts, args.seed, agent, buffer, args.device)
         sb3 = run_sb3(args.steps, args.envs, args.learning_starts, args.seed, agent.batch_size, args.device)
         if sb3 is not None:
-            result.update(sb3, ratio=result["env_steps_per_s"] / sb3["sb3_env_steps_per_s"],
-                          ratio_recorded=result["env_steps_per_s_recorded"] / sb3["sb3_env_steps_per_s"])
+            result.update(sb3, ratio=result["env_steps_per_s"] / sb3["sb3_env_steps_per_s"])
         rounds.append(result)
     median: dict[str, Any] = {key: statistics.median(r[key] for r in rounds) for key in rounds[0]}
     if "ratio" in median:
         median["ratios"] = [r["ratio"] for r in rounds]
-        median["ratios_recorded"] = [r["ratio_recorded"] for r in rounds]
     if args.json:
         print(json.dumps(median))
         return
@@ -186,10 +169,6 @@ def main() -> None:
         f"sampling {median['sampling_s']:.1f} s, updates {median['update_s']:.1f} s"
         + (f" (compiling before: {median['compile_s']:.1f} s)" if args.compile else "")
     )
-    print(
-        f"  recording the replays: {median['recording_s']:.1f} s; without it "
-        f"{median['env_steps_per_s_recorded']:.0f} env steps/s"
-    )
     if "ratio" in median:
         print(
             f"stable-baselines3 SAC: {median['sb3_env_steps_per_s']:.0f} env steps/s, "
@@ -197,8 +176,6 @@ def main() -> None:
         )
         each = ", ".join(f"{r:.2f}x" for r in median["ratios"])
         print(f"ratio: {median['ratio']:.2f}x" + (f" (median of rounds {each})" if args.rounds > 1 else ""))
-        each = ", ".join(f"{r:.2f}x" for r in median["ratios_recorded"])
-        print(f"ratio without recording: {median['ratio_recorded']:.2f}x" + (f" (median of rounds {each})" if args.rounds > 1 else ""))
 
 if __name__ == "__main__":
     main()

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.train.runs import tiny
+
 ROOT = Path(__file__).resolve().parents[1]
 COMPILERS = ("cc", "c++", "gcc", "g++")
 
@@ -44,24 +46,26 @@ def run(command: list[str], cwd: Path, env: dict[str, str]) -> str:
     """``command``'s output; fails with it unless the command succeeds."""
     result = subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True, timeout=1200, check=False)
     assert result.returncode == 0, f"{command}:\n{result.stdout}\n{result.stderr}"
-    return result.stdout
+    return result.stdout + result.stderr
 
 
 @pytest.mark.slow
 def test_the_agent_and_buffer_tests_pass_without_a_compiler(no_compiler: dict[str, str]) -> None:
     # One process: this test already runs beside others, and tests/agent holds the buffer's tests too.
     output = run(
-        [sys.executable, "-m", "pytest", "tests/agent", "-q", "-n", "0", "-p", "no:cacheprovider"], ROOT, no_compiler
+        [sys.executable, "-m", "pytest", "tests/agent", "-n", "0", "-p", "no:cacheprovider"], ROOT, no_compiler
     )
     assert " passed" in output
 
 
 @pytest.mark.slow
-def test_a_quick_training_runs_without_a_compiler(no_compiler: dict[str, str], tmp_path: Path) -> None:
-    out = tmp_path / "quick"
-    run(
-        [sys.executable, "-c", "from lanrocli.cli.app import app; app()", "train", "--quick", "--out", str(out)],
-        tmp_path,
-        no_compiler,
-    )
+def test_a_training_asking_for_a_compiled_update_runs_eager_without_a_compiler(
+    no_compiler: dict[str, str], tmp_path: Path
+) -> None:
+    """The tiny curriculum of the run tests, its update asked to compile: torch.compile cannot build its
+    kernels here, so the run must say so and train eagerly to the end, tests included."""
+    out = tmp_path / "run"
+    command = [sys.executable, "-c", "from lanrocli.cli.app import app; app()", "train", str(tiny(tmp_path))]
+    output = run([*command, "--out", str(out), "--set", "agent.compile=true"], tmp_path, no_compiler)
+    assert "torch.compile failed here, the update runs eager" in output
     assert list(out.glob("stage-*/test.json")), "the run saved no stage's test results"

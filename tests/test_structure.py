@@ -19,16 +19,16 @@ import lanrocli
 PACKAGE = Path(lanrocli.__file__).parent
 LAYERS = (
     "core",
+    "tasks",
     "language",
     "sim",
-    "tasks",
     "envs",
     "agent",
     "config",
     "evaluation",
     "train",
-    "report",
     "sweep",
+    "report",
     "integrations",
     "pretrained",
     "cli",

@@ -169,9 +169,9 @@ class SACAgent:
         and touch disjoint parameters, so one backward pass of their sum and one optimiser step serve all."""
         tokens = torch.as_tensor(np.concatenate([batch.instruction, batch.next_instruction]), device=self.device)
         sentences, inverse = distinct_sentences(tokens.to(torch.int64))
-        *learning, target = self._update_encoders()
+        *learning, target_encoder = self._update_encoders()
         with torch.no_grad():
-            target_summaries = target(sentences)[inverse]
+            target_summaries = target_encoder(sentences)[inverse]
         summaries = torch.stack([*(encoder(sentences)[inverse] for encoder in learning), target_summaries])
         loss, metrics = self._losses(summaries, update_tensors(self, self._sampled_tensors(batch)), batch.labelled)
         self.optimizer.zero_grad(set_to_none=True)
@@ -194,7 +194,7 @@ class SACAgent:
         if self._compiled is not None:
             try:
                 return self._compiled(self, *inputs)
-            except Exception as error:  # noqa: BLE001 - any failure to compile; eager then raises a real error again
+            except Exception as error:  # any failure to compile; a real error is raised again by the eager call
                 logger.warning("agent.compile: torch.compile failed here, the update runs eager: %s", error)
                 self._compiled = None
         return sac_losses(self, *inputs)

@@ -9,7 +9,6 @@ import dataclasses
 import inspect
 import types
 import typing
-import warnings
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -117,11 +116,7 @@ def load_plan(
 
     try:
         settings = read_settings("--set", changes or [])
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", FutureWarning)
-            plan = load_curriculum(find_curriculum(path)) if path is not None else builtin_curriculum()
-        for warning in caught:
-            err_console.print(f"[bold yellow]warning:[/] {escape(f'{path}: {warning.message}')}")
+        plan = load_curriculum(find_curriculum(path)) if path is not None else builtin_curriculum()
         if quick and path is not None:
             plan = plan.quick()
         if settings:

@@ -41,7 +41,7 @@ import pybullet
 from rich.console import Console
 from rich.markup import escape
 
-from lanrocli.core.choices import Task
+from lanrocli.tasks import Task
 from lanrocli.envs.caption import caption
 from lanrocli.envs.env import IMAGE_SIZE, LanroEnv
 from lanrocli.evaluation.evaluate import save_gif

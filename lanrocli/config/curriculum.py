@@ -18,7 +18,8 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
 from lanrocli.agent.settings import BufferSettings
-from lanrocli.core.choices import Kind, Split, Task
+from lanrocli.core.choices import Kind, Split
+from lanrocli.tasks import Task
 from lanrocli.envs.scene import check_scenes
 from lanrocli.config.overrides import apply_settings
 from lanrocli.config.sections import (

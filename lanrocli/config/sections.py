@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import typing
-import warnings
 from typing import Any, ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, create_model, field_validator, model_validator
@@ -94,19 +93,6 @@ class Promote(BaseModel):
         """The rule as ``lanro train`` and ``report.md`` state it: ``corrected >= 0.9, 3 pooled``."""
         statistic = ">=" if self.statistic == "mean" else "lower bound >="
         return f"{self.on} {statistic} {self.success:g}, {self.patience} pooled"
-
-    @field_validator("on", mode="before")
-    @classmethod
-    def _renamed(cls, on: Any) -> Any:
-        if on == "corrections":
-            warnings.warn(
-                "promote.on: 'corrections' is deprecated and read as 'corrected' (the success of episodes in which "
-                "a correction was spoken); write 'on: corrected'",
-                FutureWarning,
-                stacklevel=2,
-            )
-            return "corrected"
-        return on
 
 
 class EvalConfig(BaseModel):

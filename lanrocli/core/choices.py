@@ -1,25 +1,16 @@
-"""The named choices every layer shares: tasks, scene modes, kinds and forms of correction, the sentence shown,
+"""The named choices every layer shares: scene modes, kinds and forms of correction, the sentence shown,
 the devices lanro runs on.
 
 One enum each, read alike by the environment, the curriculum schema (pydantic), the command line (typer)
-and the reports, so a new value is added here once; the task names alone come from the task classes of
-``lanrocli.tasks``. Each is a ``StrEnum``: its members are their values as strings (equal, hashed, printed
+and the reports, so a new value is added here once; the task names come from the task classes
+(``lanrocli.tasks.Task``). Each is a ``StrEnum``: its members are their values as strings (equal, hashed, printed
 and written to JSON as them), which is what files and the command line carry.
 """
 
 from __future__ import annotations
 
 import re
-import warnings
 from enum import StrEnum
-
-from lanrocli.tasks import TASKS
-
-Task = StrEnum("Task", [(name.upper(), name) for name in TASKS], module=__name__)
-"""The names of the tasks registered in ``lanrocli.tasks`` when this module loads (the built-in ones), in
-their order: what the curriculum schema (pydantic) and the command line (typer) accept. What a task is and
-does belongs to its class, ``lanrocli.tasks.task_class(name)``."""
-
 
 class Mode(StrEnum):
     """Which properties vary between the objects of a scene."""
@@ -30,19 +21,6 @@ class Mode(StrEnum):
     """The three shapes in three colours."""
     COLOUR_SHAPE = "colour_shape"
     """The three shapes in the nine colours."""
-
-    @classmethod
-    def _missing_(cls, value: object) -> Mode | None:
-        # Curricula, checkpoints and commands written before the spelling was made one still load.
-        if isinstance(value, str) and value.replace("color", "colour") in cls._value2member_map_:
-            new = cls(value.replace("color", "colour"))
-            warnings.warn(
-                f"mode {value!r} is read as {new.value!r}, its spelling now; write {new.value!r}",
-                FutureWarning,
-                stacklevel=2,
-            )
-            return new
-        return None
 
 
 class Kind(StrEnum):

@@ -14,7 +14,7 @@ import torch
 import yaml
 from ray import tune
 
-from lanrocli.cli.display.training import StepRate, evaluation_summary, stage_end_line
+from lanrocli.train.progress import StepRate, evaluation_summary, stage_end_line
 from lanrocli.sweep.plan import trial_started
 from lanrocli.sweep.protocol import FINISHED, RUNNING, STOPPED, StopFile, TrialJob, TrialProgress
 from lanrocli.config.curriculum import Curriculum

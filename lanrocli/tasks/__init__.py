@@ -5,6 +5,8 @@ The built-in tasks are registered here, in the order whose indices replay buffer
 task's class goes at the end of ``BUILT_IN`` (docs/architecture.md, "add a task").
 """
 
+from enum import StrEnum
+
 from lanrocli.tasks.base import FALLEN, ArmView, OracleMemory, TaskDefinition, TaskView
 from lanrocli.tasks.grasp import Grasp
 from lanrocli.tasks.lift import Lift
@@ -26,6 +28,11 @@ BUILT_IN: tuple[type[TaskDefinition], ...] = (Reach, Push, Grasp, Lift)
 for _task in BUILT_IN:
     register(_task)
 
+Task = StrEnum("Task", [(name.upper(), name) for name in TASKS], module=__name__)
+"""The names of the tasks registered in ``lanrocli.tasks`` when this module loads (the built-in ones), in
+their order: what the curriculum schema (pydantic) and the command line (typer) accept. What a task is and
+does belongs to its class, ``lanrocli.tasks.task_class(name)``."""
+
 __all__ = [
     "BUILT_IN",
     "FALLEN",
@@ -38,6 +45,7 @@ __all__ = [
     "Push",
     "Reach",
     "TaskDefinition",
+    "Task",
     "TaskView",
     "check_task",
     "make_task",

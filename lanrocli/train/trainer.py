@@ -24,7 +24,8 @@ from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
 from lanrocli.agent.networks import ObjectLayout
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings, SACSettings
-from lanrocli.core.choices import Task, check_device
+from lanrocli.core.choices import check_device
+from lanrocli.tasks import Task
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
 from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings

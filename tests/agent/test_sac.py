@@ -45,9 +45,7 @@ def _batch(rng: np.random.Generator, size: int = 64) -> Batch:
         done=np.ones(size, dtype=bool),
         named=np.full(size, -1),
         label=np.full(size, -1),
-        failed=np.zeros(size, dtype=bool),
         slots=np.arange(size),
-        steps=np.ones(size, dtype=np.int64),
     )
 
 

@@ -19,7 +19,7 @@ from lanrocli.language import grammar_vocabulary
 
 runner = CliRunner()
 
-QUICK = Path(__file__).parents[1] / "lanrocli" / "curricula" / "quick.yaml"
+QUICK = Path(__file__).parents[2] / "lanrocli" / "curricula" / "quick.yaml"
 """The curriculum ``lanro train --quick`` runs without a file."""
 
 
@@ -252,7 +252,7 @@ def test_quick_training_run_then_eval_plot_and_refusals(tmp_path) -> None:
 def test_every_shipped_curriculum_checks(tmp_path) -> None:
     from pathlib import Path
 
-    files = sorted(Path(__file__).parents[1].joinpath("curricula").glob("*.yaml"))
+    files = sorted(Path(__file__).parents[2].joinpath("curricula").glob("*.yaml"))
     assert {f.stem for f in files} >= {"reach", "push", "grasp", "lift"}
     for path in files:
         result = runner.invoke(app, ["check", str(path)])
@@ -367,17 +367,6 @@ def test_train_on_a_device_this_machine_cannot_serve_is_a_clear_error(tmp_path: 
     assert result.exit_code == 2, result.output
     assert "error:" in result.output and device in result.output and "Traceback" not in result.output
     assert not out.exists(), "the device is checked before the run folder is made"
-
-
-def test_train_with_a_compiled_update_and_no_cpp_compiler_is_a_clear_error(tmp_path: Path) -> None:
-    import torch._inductor.config
-
-    out = tmp_path / "run"
-    with torch._inductor.config.patch({"cpp.cxx": (None, str(tmp_path / "no-such-g++"))}):
-        result = runner.invoke(app, ["train", "--quick", "--out", str(out), "--set", "agent.compile=true", "--device", "cpu"])
-    assert result.exit_code == 2, result.output
-    assert "error:" in result.output and "C++ compiler" in result.output and "Traceback" not in result.output
-    assert not out.exists(), "the compiler is looked for before the run folder is made"
 
 
 def test_eval_acting_attention_is_recorded_and_refused_where_nothing_attends(

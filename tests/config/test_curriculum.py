@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from lanrocli.agent.settings import BufferSettings, SACSettings
-from lanrocli.core.choices import Kind, Mode, Split, Task
+from lanrocli.core.choices import Kind, Mode, Split
+from lanrocli.tasks import Task
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.language import COLOURS, TASKS, ObjectProps
 from lanrocli.config.curriculum import (
@@ -94,12 +95,6 @@ def test_choices_are_the_shared_enums() -> None:
     assert set(TASKS) == {task.value for task in Task}
 
 
-def test_old_mode_spelling_is_read_with_a_warning(tmp_path: Path) -> None:
-    with pytest.warns(FutureWarning, match="'color_shape' is read as 'colour_shape'"):
-        curriculum = load_curriculum(write(tmp_path, "c.yaml", MINIMAL + "    env: {objects: 3, mode: color_shape}\n"))
-    assert curriculum.stages[0].env.mode is Mode.COLOUR_SHAPE
-
-
 def test_unknown_key_suggests_the_closest_field(tmp_path: Path) -> None:
     text = MINIMAL.replace("    budget:", "    env:\n      corection_rate: 0.5\n    budget:")
     problem = only_problem(write(tmp_path, "c.yaml", text))
@@ -166,13 +161,6 @@ def test_promote_on_corrected_with_corrections_loads(tmp_path: Path) -> None:
     promote = load_curriculum(write(tmp_path, "c.yaml", text)).stages[0].promote
     assert promote is not None
     assert (promote.success, promote.on, promote.patience, promote.statistic) == (0.8, "corrected", 2, "mean")
-
-
-def test_the_old_name_corrections_is_read_as_corrected_with_a_warning(tmp_path: Path) -> None:
-    text = MINIMAL + "    env: {correction_rate: 0.5}\n    promote: {success: 0.8, on: corrections}\n"
-    with pytest.warns(FutureWarning, match="'corrections' is deprecated.*on: corrected"):
-        promote = load_curriculum(write(tmp_path, "c.yaml", text)).stages[0].promote
-    assert promote is not None and promote.on == "corrected"
 
 
 def test_promote_statistic_is_mean_or_lower_bound(tmp_path: Path) -> None:

@@ -43,11 +43,6 @@ def test_values_become_their_enums() -> None:
     assert settings.mode is Mode.SHAPE and settings.kinds == (Kind.WRONG_OBJECT,)
 
 
-def test_old_spelling_of_modes_is_read_with_a_warning() -> None:
-    with pytest.warns(FutureWarning, match="'color' is read as 'colour'"):
-        assert EnvSettings(mode="color").mode is Mode.COLOUR
-
-
 def test_plain_data_round_trips_through_json() -> None:
     settings = EnvSettings(objects=3, mode=Mode.COLOUR_SHAPE, correction_rate=0.5, kinds=(Kind.AMBIGUITY,))
     data = json.loads(json.dumps(settings.to_dict()))

@@ -142,14 +142,14 @@ def test_a_setting_written_as_int_or_as_float_is_one_setting(tmp_path: Path) -> 
 def test_a_setting_an_older_run_lacks_reads_as_its_default_and_names_do_not_split(tmp_path: Path) -> None:
     runs = [make_run(tmp_path / f"r{seed}", seed, [(40, True, 0.5, None)]) for seed in (0, 1, 2)]
     older = yaml.safe_load((runs[0] / CONFIG).read_text())
-    del older["agent"]["see_rest"]  # trained before the setting existed
+    del older["agent"]["share_encoder"]  # trained before the setting existed
     older["name"] = "renamed"
     (runs[0] / CONFIG).write_text(yaml.safe_dump(older))
     assert [(g.label, len(g.runs)) for g in group_runs(runs)] == [("", 3)]
     changed = yaml.safe_load((runs[1] / CONFIG).read_text())
-    changed["agent"]["see_rest"] = True
+    changed["agent"]["share_encoder"] = True
     (runs[1] / CONFIG).write_text(yaml.safe_dump(changed))
-    assert [(g.label, len(g.runs)) for g in group_runs(runs)] == [("agent.see_rest=false", 2), ("agent.see_rest=true", 1)]
+    assert [(g.label, len(g.runs)) for g in group_runs(runs)] == [("agent.share_encoder=false", 2), ("agent.share_encoder=true", 1)]
 
 
 def test_a_sweep_folder_stands_for_its_trials(tmp_path: Path) -> None:

@@ -8,7 +8,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from lanrocli.core.choices import Task
+from lanrocli.tasks import Task
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.policies import make_policy
 from lanrocli.language import TASKS, UNK_ID, grammar_vocabulary

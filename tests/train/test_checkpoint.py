@@ -138,11 +138,3 @@ def test_a_checkpoint_without_its_manifest_is_refused(tmp_path: Path) -> None:
     (directory / MANIFEST_FILE).unlink()
     with pytest.raises(CheckpointError, match="manifest.json is missing"):
         load_checkpoint(directory)
-
-
-def test_settings_lanro_no_longer_has_load_only_at_the_value_it_now_always_uses() -> None:
-    saved = TrainSettings(task="reach").to_dict()
-    retired = {**saved, "buffer": {**saved["buffer"], "n_step": 1}, "env": {**saved["env"], "scripted_recovery": 0.0}}
-    assert TrainSettings.from_dict(retired) == TrainSettings(task="reach")
-    with pytest.raises(ValueError, match="buffer.n_step: 3"):
-        TrainSettings.from_dict({**saved, "buffer": {**saved["buffer"], "n_step": 3}})

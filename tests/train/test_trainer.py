@@ -111,7 +111,7 @@ LEVERS = (
     dataclasses.replace(
         SETTINGS, buffer=BufferSettings(size=5000, relabel_negations=True, fresh_targets=True, ground_real=True)
     ),
-    SACSettings(batch_size=32, architecture="objects", sentence_in_trunk=False, see_rest=True),
+    SACSettings(batch_size=32, architecture="objects", sentence_in_trunk=False, acting_attention="argmax"),
 )
 """The correction levers the curricula use: they change what is stored and sampled."""
 

@@ -16,7 +16,8 @@ from rich.console import Console
 from rich.markup import escape
 
 from lanrocli.cli.arguments import device_option, env_changes, err_console, fail, with_env_options
-from lanrocli.core.choices import ActingAttention, Instruction, Split, Task
+from lanrocli.core.choices import ActingAttention, Instruction, Split
+from lanrocli.tasks import Task
 from lanrocli.cli.display.commands import env_summary, print_evaluation
 from lanrocli.envs.settings import EnvSettings
 

@@ -9,7 +9,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from lanrocli.core.choices import Task
+from lanrocli.tasks import Task
 from lanrocli.cli.display.commands import print_grammar_stats, print_sampled, write_sentences_json
 from lanrocli.language import all_sentences, grammar_vocabulary, sample_sentence, sentence_stats
 

@@ -10,7 +10,7 @@ import typer
 from rich.console import Console
 
 from lanrocli.cli.arguments import device_option, env_changes, fail, with_env_options
-from lanrocli.core.choices import Task
+from lanrocli.tasks import Task
 from lanrocli.envs.settings import CORRECTION_LIMIT
 
 

@@ -15,6 +15,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
+from lanrocli.train.progress import StepRate, evaluation_summary, rule_text, stage_end_line
 from lanrocli.train.stop import StopRequest
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
 from lanrocli.train.runstate import StageResult
@@ -24,59 +25,6 @@ __all__ = ["StopRequest", "TrainingDisplay"]
 
 PLAIN_INTERVAL = 60.0
 """Seconds between progress lines when the output is not a terminal."""
-
-RATE_WINDOW = 10.0
-"""Seconds over which environment steps per second are measured."""
-
-
-def _rule(stage: Stage) -> str:
-    if stage.promote is None:
-        return "runs its whole budget"
-    return f"promote at {stage.promote.described()}"
-
-
-def _percent(value: Any) -> str:
-    return "-" if value in ("", None) else f"{100 * float(value):.0f}%"
-
-
-def evaluation_summary(row: dict[str, Any]) -> str:
-    """An evaluation's row of ``metrics.csv`` in words: ``success 88%, corrected 70% of 20``."""
-    return f"success {_percent(row['success'])}, corrected {_percent(row['corrected_success'])} of {row['corrected_episodes']}"
-
-
-def stage_end_line(result: StageResult, rates: dict[str, float | None] | None = None) -> str:
-    """The line a stage's end prints; with its ``rates`` (``RunState.rates``), where the time went."""
-    how = "promoted" if result.ended == "promoted" else "budget spent"
-    line = f"stage {result.index + 1} {result.name} ended ({how}) after {result.end - result.start:,} steps"
-    if rates:
-        units = {"collection": "steps/s collecting", "updates": "updates/s", "evaluation": "steps/s evaluating"}
-        line += "; " + ", ".join(f"{value:,.0f} {units[phase]}" for phase, value in rates.items() if value is not None)
-    if result.test_seconds is not None:
-        line += f"; tests {result.test_seconds / 60:.1f} min"
-    return line
-
-
-class StepRate:
-    """Environment steps per second over the last ``RATE_WINDOW`` seconds."""
-
-    def __init__(self) -> None:
-        self._samples: list[tuple[float, int]] = []
-
-    def clear(self) -> None:
-        self._samples.clear()
-
-    def last_sample(self) -> float | None:
-        """When the last sample was taken (``time.monotonic``), or None before the first."""
-        return self._samples[-1][0] if self._samples else None
-
-    def add(self, now: float, steps: int) -> float | None:
-        """Record ``steps`` at ``now``; the rate over the window, or None while it spans no time."""
-        self._samples.append((now, steps))
-        while now - self._samples[0][0] > RATE_WINDOW:
-            self._samples.pop(0)
-        (t0, s0), (t1, s1) = self._samples[0], self._samples[-1]
-        return (s1 - s0) / (t1 - t0) if t1 > t0 else None
-
 
 class TrainingDisplay(RunObserver):
     """Draws a run's progress live (``live=True``) or as plain periodic lines."""
@@ -119,7 +67,7 @@ class TrainingDisplay(RunObserver):
 
     def on_stage_start(self, run: CurriculumRun, stage: Stage) -> None:
         index = run.state.stage
-        header = f"stage {index + 1}/{len(run.curriculum.stages)} {stage.name}: {stage.budget.steps:,} steps, {_rule(stage)}"
+        header = f"stage {index + 1}/{len(run.curriculum.stages)} {stage.name}: {stage.budget.steps:,} steps, {rule_text(stage)}"
         self._rate.clear()
         if self._progress is not None:
             self._progress.console.print(header)
