@@ -47,13 +47,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from lanrocli.agent.policy import AgentPolicy
 from lanrocli.core.choices import ActingAttention, CorrectionForm
 from lanrocli.envs.env import LanroEnv
 from lanrocli.language.properties import ObjectProps
+from lanrocli.pretrained import agent_path
 from lanrocli.tasks.reach import REACH_STILL
 from lanrocli.tasks.registry import task_class
-from lanrocli.agent.policy import AgentPolicy
-from lanrocli.pretrained import agent_path
 from lanrocli.train.testset import CORRECTION_TEST_NEGATION_RATE
 from lanrocli.train.trainer import load_policy
 
@@ -105,8 +105,14 @@ def _touching_goal(env: LanroEnv, goal: int) -> tuple[bool, bool]:
     return robot, other
 
 
-WENT = ("the goal", "back to the object corrected", "back to an object corrected earlier",
-        "to another object", "stayed on a wrong object", "to no object")
+WENT = (
+    "the goal",
+    "back to the object corrected",
+    "back to an object corrected earlier",
+    "to another object",
+    "stayed on a wrong object",
+    "to no object",
+)
 
 
 def _went(goal: int, before: list[int], after: list[int], on_other_at_end: bool) -> str:
@@ -173,8 +179,18 @@ def run(env: LanroEnv, policy: AgentPolicy, seed: int, nth: int = 1) -> Outcome 
     else:
         result = "fell short"
     went = _went(goal, *reached, others_achieved)
-    return Outcome(result, closest, first_knock, held_at_correction, others_achieved, went, ", ".join(forms[:nth]),
-                   knocked_at_correction, shortcut, pushed_by)
+    return Outcome(
+        result,
+        closest,
+        first_knock,
+        held_at_correction,
+        others_achieved,
+        went,
+        ", ".join(forms[:nth]),
+        knocked_at_correction,
+        shortcut,
+        pushed_by,
+    )
 
 
 def main() -> None:
@@ -183,7 +199,9 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--kinds", nargs="+", default=["ambiguity", "instruction_correction"])
-    parser.add_argument("--after", type=int, default=1, help="judge from the Nth correction spoken (default: the first)")
+    parser.add_argument(
+        "--after", type=int, default=1, help="judge from the Nth correction spoken (default: the first)"
+    )
     parser.add_argument(
         "--negation-rate",
         type=float,
@@ -218,8 +236,10 @@ def main() -> None:
         median = f", closest approach to the goal after it: median {np.median(near) * 100:.1f} cm" if near else ""
         print(f"  {result:<16} {results[result]:>4}{median}")
     knocked = [o for o in spoken if o.goal_knocked_at_correction]
-    print(f"the goal already knocked (moved more than {REACH_STILL * 100:g} cm) when it was spoken: {len(knocked)}, "
-          f"{sum(o.result == 'succeeded' for o in knocked)} succeeded")
+    print(
+        f"the goal already knocked (moved more than {REACH_STILL * 100:g} cm) when it was spoken: {len(knocked)}, "
+        f"{sum(o.result == 'succeeded' for o in knocked)} succeeded"
+    )
     print("where the arm went next (failures of them in brackets):")
     went = Counter(o.went_next for o in spoken)
     went_lost = Counter(o.went_next for o in spoken if o.result != "succeeded")
@@ -230,8 +250,10 @@ def main() -> None:
     forms_lost = Counter(o.forms for o in spoken if o.result != "succeeded")
     for form, count in forms.most_common():
         print(f"  {form:<36} {count:>4} ({forms_lost[form]})")
-    print(f"negations as correction {args.after} among three objects, by whether the object least like the one "
-          "ruled out is the goal (failures in brackets):")
+    print(
+        f"negations as correction {args.after} among three objects, by whether the object least like the one "
+        "ruled out is the goal (failures in brackets):"
+    )
     for reading in ("agrees", "disagrees", "tie"):
         read = [o for o in spoken if o.shortcut == reading]
         print(f"  {reading:<36} {len(read):>4} ({sum(o.result != 'succeeded' for o in read)})")
@@ -239,8 +261,10 @@ def main() -> None:
     print("first object knocked, in the failures:")
     for knock, count in knocks.most_common():
         print(f"  {knock:<36} {count:>4}")
-    print(f"what touched the goal in the {PUSH_STEPS} steps before it first moved {REACH_STILL * 100:g} cm, in the "
-          "failures with the goal knocked (before the correction / after it):")
+    print(
+        f"what touched the goal in the {PUSH_STEPS} steps before it first moved {REACH_STILL * 100:g} cm, in the "
+        "failures with the goal knocked (before the correction / after it):"
+    )
     moved_goal = [o for o in spoken if o.result != "succeeded" and o.goal_pushed_by is not None]
     for pusher in PUSHERS:
         before = sum(o.goal_pushed_by == pusher and o.goal_knocked_at_correction for o in moved_goal)

@@ -66,7 +66,9 @@ def measure_ours(task: str, steps: int, seed: int) -> dict[str, float]:
 
 
 def measure_reference(python: str, task: str, steps: int) -> float:
-    out = subprocess.run([python, "-c", REFERENCE_SNIPPET, task, str(steps)], capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [python, "-c", REFERENCE_SNIPPET, task, str(steps)], capture_output=True, text=True, check=True
+    )
     return float(out.stdout.strip().splitlines()[-1])
 
 
@@ -98,7 +100,9 @@ def main() -> None:
     print(f"{'task':<7}{'lanro steps/s':>15}{'bare physics':>15}{'overhead':>10}{'lanro-gym':>12}{'ratio':>8}")
     for task, row in results.items():
         ref = f"{row['reference_steps_per_s']:12.0f}{row['ratio']:8.2f}" if "ratio" in row else ""
-        print(f"{task:<7}{row['steps_per_s']:15.0f}{row['physics_steps_per_s']:15.0f}{100 * row['overhead']:9.1f}%{ref}")
+        print(
+            f"{task:<7}{row['steps_per_s']:15.0f}{row['physics_steps_per_s']:15.0f}{100 * row['overhead']:9.1f}%{ref}"
+        )
 
 
 if __name__ == "__main__":

@@ -20,11 +20,11 @@ from pathlib import Path
 
 import torch
 
-from lanrocli.envs.env import LanroEnv
-from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
-from lanrocli.envs.workers import make_envs
-from lanrocli.pretrained import agent_path
 from lanrocli.core.seeds import held_out_seed
+from lanrocli.envs.env import LanroEnv
+from lanrocli.envs.workers import make_envs
+from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
+from lanrocli.pretrained import agent_path
 from lanrocli.train.trainer import load_policy
 
 
@@ -43,7 +43,12 @@ def main() -> None:
         env_settings = env_settings.replace(correction_rate=1.0)
 
     make = functools.partial(
-        LanroEnv, settings.task, env_settings, object_slots=settings.slots, vocabulary=policy.vocabulary, holdout=settings.holdout
+        LanroEnv,
+        settings.task,
+        env_settings,
+        object_slots=settings.slots,
+        vocabulary=policy.vocabulary,
+        holdout=settings.holdout,
     )
     first = held_out_seed(settings.seed, settings.stage)
     ways = {
@@ -68,7 +73,9 @@ def main() -> None:
         if way != base:
             line += f", {statistics.median(rates[way]) / statistics.median(rates[base]):.2f}x (rounds: {ratios})"
         differing = sum(x.success != y.success for x, y in zip(reports[base].results, reports[way].results))
-        print(f"{line}; success {reports[way].overall.value:.3f}, outcomes differing from one after another: {differing}")
+        print(
+            f"{line}; success {reports[way].overall.value:.3f}, outcomes differing from one after another: {differing}"
+        )
 
 
 if __name__ == "__main__":

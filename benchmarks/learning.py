@@ -37,8 +37,17 @@ SETTINGS = {
 }
 
 
-def curriculum(setting: str, steps: int, seed: int, envs: int, every: int, episodes: int, target: float | None,
-               agent: dict[str, Any], random_start: float = 0.0) -> Curriculum:
+def curriculum(
+    setting: str,
+    steps: int,
+    seed: int,
+    envs: int,
+    every: int,
+    episodes: int,
+    target: float | None,
+    agent: dict[str, Any],
+    random_start: float = 0.0,
+) -> Curriculum:
     env = {**SETTINGS[setting], "random_start": random_start}
     stage: dict[str, Any] = {"name": setting, "env": env, "budget": {"steps": steps}}
     if target is not None:
@@ -85,22 +94,35 @@ def main() -> None:
     parser.add_argument("--eval-episodes", type=int, default=100)
     parser.add_argument("--target", type=float, help="stop once evaluation success reaches this")
     parser.add_argument(
-        "--random-start", type=float, default=0.0, metavar="P",
+        "--random-start",
+        type=float,
+        default=0.0,
+        metavar="P",
         help="share of training episodes that start with the hand at a random point near the table",
     )
     parser.add_argument("--device", choices=["cpu", "cuda"], help="default: cuda if available, else cpu")
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out")
     parser.add_argument(
-        "--agent", nargs="*", default=[], metavar="NAME=VALUE",
+        "--agent",
+        nargs="*",
+        default=[],
+        metavar="NAME=VALUE",
         help="agent settings, e.g. critics=2 (default: the paper's, read object by object)",
     )
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     device = pick_device(args.device)
     plan = curriculum(
-        args.setting, args.steps, args.seed, args.envs, args.eval_every, args.eval_episodes, args.target,
-        {**AGENT, **agent_overrides(args.agent)}, args.random_start,
+        args.setting,
+        args.steps,
+        args.seed,
+        args.envs,
+        args.eval_every,
+        args.eval_episodes,
+        args.target,
+        {**AGENT, **agent_overrides(args.agent)},
+        args.random_start,
     )
     if args.resume:
         run = CurriculumRun.resume(args.out, plan, device, Printer())
@@ -112,8 +134,10 @@ def main() -> None:
         finally:
             run.close()
     if not finished:
-        print(f"stopped at {run.trainer.progress.env_steps} environment steps; checkpoint written. "
-              "Continue with the same arguments plus --resume.")
+        print(
+            f"stopped at {run.trainer.progress.env_steps} environment steps; checkpoint written. "
+            "Continue with the same arguments plus --resume."
+        )
         raise SystemExit(130)
     result = run.state.results[-1]
     if result.ended == "promoted":

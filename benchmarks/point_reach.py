@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from learning import AGENT, agent_overrides  # this directory's learning benchmark: same agent, same --agent parsing
 from pydantic import ValidationError
 
 from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
@@ -33,11 +34,9 @@ from lanrocli.agent.buffer.transitions import EpisodeData
 from lanrocli.agent.networks import ObjectLayout
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings
+from lanrocli.config.sections import AgentConfig
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE
 from lanrocli.language import COLOURS, SHAPES, ObjectProps, grammar_vocabulary
-from lanrocli.config.sections import AgentConfig
-
-from learning import AGENT, agent_overrides  # this directory's learning benchmark: same agent, same --agent parsing
 
 VOCABULARY = grammar_vocabulary()
 START = np.array([0.0, 0.0, 0.10])
@@ -124,7 +123,12 @@ def main() -> None:
     layout = ObjectLayout(ARM_SIZE, OBJECT_SIZE, args.objects)
     agent = SACAgent(layout.size, 3, len(VOCABULARY), settings, seed=args.seed, layout=layout)
     buffer = ReplayBuffer(
-        BufferSettings().size, layout.size, 3, max_objects=args.objects, vocabulary=VOCABULARY, negations=False,
+        BufferSettings().size,
+        layout.size,
+        3,
+        max_objects=args.objects,
+        vocabulary=VOCABULARY,
+        negations=False,
         seed=args.seed,
     )
     collect_rng, learn_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(args.seed).spawn(2))

@@ -19,10 +19,10 @@ import multiprocessing
 import statistics
 
 import torch
+from train_throughput import run_ours
 
 from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.config.curriculum import find_curriculum, load_curriculum
-from train_throughput import run_ours
 
 
 def one_training(

@@ -28,8 +28,12 @@ from lanrocli.config.curriculum import builtin_curriculum, load_curriculum
 
 def timed(args: list[str], cwd: Path) -> float:
     start = time.perf_counter()
-    result = subprocess.run([sys.executable, "-c", "from lanrocli.cli.app import app; app()", *args], cwd=cwd,
-                            capture_output=True, text=True)
+    result = subprocess.run(
+        [sys.executable, "-c", "from lanrocli.cli.app import app; app()", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+    )
     seconds = time.perf_counter() - start
     if result.returncode != 0:
         raise SystemExit(f"lanro {' '.join(args)} failed:\n{result.stdout}\n{result.stderr}")
@@ -65,12 +69,20 @@ def main() -> None:
             same = metrics(cwd / f"train-{number}") == metrics(cwd / f"sweep-{number}" / f"seed={options.seed}")
             rounds.append({**times, "ratio": times["sweep"] / times["train"], "same_metrics": same})
             print(json.dumps({"round": number + 1, **rounds[-1]}), flush=True)
-    print(json.dumps({
-        "curriculum": options.curriculum or "built-in", "name": plan.name, "quick": options.quick, "rounds": len(rounds),
-        "train_s": [round(r["train"], 1) for r in rounds], "sweep_s": [round(r["sweep"], 1) for r in rounds],
-        "median_ratio": round(statistics.median(r["ratio"] for r in rounds), 3),
-        "same_metrics": all(r["same_metrics"] for r in rounds),
-    }))
+    print(
+        json.dumps(
+            {
+                "curriculum": options.curriculum or "built-in",
+                "name": plan.name,
+                "quick": options.quick,
+                "rounds": len(rounds),
+                "train_s": [round(r["train"], 1) for r in rounds],
+                "sweep_s": [round(r["sweep"], 1) for r in rounds],
+                "median_ratio": round(statistics.median(r["ratio"] for r in rounds), 3),
+                "same_metrics": all(r["same_metrics"] for r in rounds),
+            }
+        )
+    )
 
 
 if __name__ == "__main__":

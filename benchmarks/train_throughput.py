@@ -2,7 +2,8 @@
 spent waiting for the simulation, sampling (and relabelling) batches, and updating the networks.
 
 Settings: reach with 2 objects, 2 environments (subprocesses), one update per environment step, batch 256
-(``--batch-size``, for both agents), on the CPU (``--device``, for both agents), updates starting after ``--learning-starts`` steps.
+(``--batch-size``, for both agents), on the CPU (``--device``, for both agents), updates starting after
+``--learning-starts`` steps.
 Our agent is ``SACSettings``' default network (``--architecture``), or with ``--curriculum`` the agent and replay
 buffer a curriculum trains (its batch size too, unless ``--batch-size`` is given): ``--curriculum reach`` is the
 agent every shipped curriculum inherits. If stable-baselines3
@@ -29,9 +30,9 @@ from typing import Any
 import torch
 
 from lanrocli.agent.settings import BufferSettings, SACSettings
+from lanrocli.config.curriculum import find_curriculum, load_curriculum
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.settings import EnvSettings
-from lanrocli.config.curriculum import find_curriculum, load_curriculum
 from lanrocli.train.trainer import Trainer, TrainSettings
 
 
@@ -53,7 +54,13 @@ class Stopwatch:
 
 
 def run_ours(
-    steps: int, envs: int, learning_starts: int, seed: int, agent: SACSettings, buffer: BufferSettings, device: str,
+    steps: int,
+    envs: int,
+    learning_starts: int,
+    seed: int,
+    agent: SACSettings,
+    buffer: BufferSettings,
+    device: str,
 ) -> dict[str, float]:
     settings = TrainSettings(
         task="reach", env=EnvSettings(objects=2), seed=seed, envs=envs, learning_starts=learning_starts, buffer=buffer
@@ -176,6 +183,7 @@ def main() -> None:
         )
         each = ", ".join(f"{r:.2f}x" for r in median["ratios"])
         print(f"ratio: {median['ratio']:.2f}x" + (f" (median of rounds {each})" if args.rounds > 1 else ""))
+
 
 if __name__ == "__main__":
     main()

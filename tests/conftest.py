@@ -9,7 +9,6 @@ from tests.train.runs import Baseline, finish, tiny, train
 torch.set_num_threads(1)
 
 
-
 @pytest.fixture(scope="session")
 def straight(tmp_path_factory: pytest.TempPathFactory) -> Baseline:
     """The tiny curriculum on two environments, trained by ``lanro train`` without interruption: what every

@@ -30,7 +30,13 @@ def run(command: list[str | Path], cwd: Path, lines: str | None = None) -> str:
     its output."""
     env = {key: value for key, value in os.environ.items() if key != "PYTHONPATH"}
     result = subprocess.run(
-        [str(part) for part in command], cwd=cwd, env=env, input=lines, capture_output=True, text=True, timeout=600,
+        [str(part) for part in command],
+        cwd=cwd,
+        env=env,
+        input=lines,
+        capture_output=True,
+        text=True,
+        timeout=600,
         check=False,
     )
     assert result.returncode == 0, f"{command}:\n{result.stdout}\n{result.stderr}"

@@ -76,7 +76,9 @@ def import_graph(root: Path) -> dict[str, set[str]]:
                 if statement.level:
                     above = package.split(".")[: len(package.split(".")) - statement.level + 1]
                     base = ".".join([*above, base] if base else above)
-                targets = [f"{base}.{alias.name}" if f"{base}.{alias.name}" in paths else base for alias in statement.names]
+                targets = [
+                    f"{base}.{alias.name}" if f"{base}.{alias.name}" in paths else base for alias in statement.names
+                ]
             edges |= {target for target in targets if target in paths and target != name}
         graph[name] = edges
     return graph

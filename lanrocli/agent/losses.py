@@ -48,8 +48,9 @@ class SampledTensors(NamedTuple):
 
 class UpdateTensors(NamedTuple):
     """A batch as the losses read it, rows of transitions: observations normalised, ``present`` the object
-    slots that hold objects (None for a flat agent), ``label`` the object its sentence names (-1 where none is known), ``noise`` and ``next_noise``
-    the standard normal draws of the policy's actions in this and the next states."""
+    slots that hold objects (None for a flat agent), ``label`` the object its sentence names (-1 where none is
+    known), ``noise`` and ``next_noise`` the standard normal draws of the policy's actions in this and the next
+    states."""
 
     obs: torch.Tensor
     present: torch.Tensor | None
@@ -71,12 +72,22 @@ def update_tensors(agent: Learner, sampled: SampledTensors) -> UpdateTensors:
     obs, next_obs = agent.normalizer(raw).chunk(2)
     present, next_present = (None, None) if agent.layout is None else agent.layout.present(raw).chunk(2)
     return UpdateTensors(
-        obs=obs, present=present, next_obs=next_obs, next_present=next_present, action=sampled.action.to(f32),
-        reward=sampled.reward.to(f32), not_done=1.0 - sampled.done.to(f32), label=sampled.label.to(torch.int64), noise=sampled.noise, next_noise=sampled.next_noise,
+        obs=obs,
+        present=present,
+        next_obs=next_obs,
+        next_present=next_present,
+        action=sampled.action.to(f32),
+        reward=sampled.reward.to(f32),
+        not_done=1.0 - sampled.done.to(f32),
+        label=sampled.label.to(torch.int64),
+        noise=sampled.noise,
+        next_noise=sampled.next_noise,
     )
 
 
-def sac_losses(agent: Learner, summaries: torch.Tensor, batch: UpdateTensors, labelled: bool) -> tuple[torch.Tensor, torch.Tensor]:
+def sac_losses(
+    agent: Learner, summaries: torch.Tensor, batch: UpdateTensors, labelled: bool
+) -> tuple[torch.Tensor, torch.Tensor]:
     """The sum of the critic's, the actor's, the temperature's and the grounding loss, and the update's
     metrics in :data:`~lanrocli.agent.settings.UPDATE_METRICS`' order.
 
@@ -92,7 +103,9 @@ def sac_losses(agent: Learner, summaries: torch.Tensor, batch: UpdateTensors, la
     critic_language = summaries[0, :rows]
     next_target_language = summaries[-1, rows:].detach()
     # A shared encoder learns from the critic's loss alone: the actor reads its summary detached.
-    actor_language, next_actor_language = (summaries[1] if actor.encoder is not None else summaries[0].detach()).chunk(2)
+    actor_language, next_actor_language = (summaries[1] if actor.encoder is not None else summaries[0].detach()).chunk(
+        2
+    )
 
     # Critic: regress on the soft Bellman target of the target critic and the current policy.
     with torch.no_grad():
@@ -128,8 +141,6 @@ def sac_losses(agent: Learner, summaries: torch.Tensor, batch: UpdateTensors, la
     total = critic_loss + actor_loss + alpha_loss + s.grounding * grounding_loss
     metrics = [critic_loss, actor_loss, alpha_loss, grounding_loss, alpha, q.mean(), target_q.mean(), -log_prob.mean()]
     return total, torch.stack([metric.detach() for metric in metrics])
-
-
 
 
 Losses = Callable[[Learner, torch.Tensor, UpdateTensors, bool], tuple[torch.Tensor, torch.Tensor]]

@@ -2,8 +2,8 @@
 
 Both actor and critic read an observation through a 128-unit layer and join it with a 32-number summary of
 the goal sentence (and, for the critic, the action) before the 256-unit hidden layers. The sentence summary
-is computed by a :class:`~lanrocli.agent.encoder.LanguageEncoder` that each network holds as ``encoder``; the networks take the
-summary as an input rather than the tokens, so the agent decides whether actor and critic read the
+is computed by a :class:`~lanrocli.agent.encoder.LanguageEncoder` that each network holds as ``encoder``; the
+networks take the summary as an input rather than the tokens, so the agent decides whether actor and critic read the
 sentence through separate encoders (the default) or through the critic's one.
 
 With an :class:`ObjectLayout` (``architecture: objects``) a :class:`SceneReader` first picks the object the
@@ -25,7 +25,6 @@ from torch import nn
 
 if TYPE_CHECKING:
     from lanrocli.agent.encoder import LanguageEncoder
-
 
 
 @dataclass(frozen=True)
@@ -120,7 +119,11 @@ class SceneReader(nn.Module):
 
 
 def attention_loss(
-    critic_scores: torch.Tensor | None, actor_scores: torch.Tensor | None, label: torch.Tensor, labelled: bool, weight: float
+    critic_scores: torch.Tensor | None,
+    actor_scores: torch.Tensor | None,
+    label: torch.Tensor,
+    labelled: bool,
+    weight: float,
 ) -> torch.Tensor:
     """The grounding loss: cross-entropy of the actor's and each critic's attention (logits [members, B,
     slots]) against the object that a transition's sentence names (``label`` [B], -1 where none is known),
@@ -287,7 +290,11 @@ class Critic(nn.Module):
             obs = self.reader(obs, language, present, scores)
         observed = F.relu(self.obs_layer(obs))
         first = self._first_layer()
-        state = torch.cat([observed, language.expand(self.n_critics, -1, -1)], dim=2) if self.sentence_in_trunk else observed
+        state = (
+            torch.cat([observed, language.expand(self.n_critics, -1, -1)], dim=2)
+            if self.sentence_in_trunk
+            else observed
+        )
         return torch.baddbmm(first.bias, state, first.weight[:, : -self.action_dim])
 
     def value(self, observed: torch.Tensor, action: torch.Tensor, frozen: bool = False) -> torch.Tensor:
@@ -298,7 +305,9 @@ class Critic(nn.Module):
         def weights(layer: EnsembleLinear) -> tuple[torch.Tensor, torch.Tensor]:
             return (layer.weight.detach(), layer.bias.detach()) if frozen else (layer.weight, layer.bias)
 
-        h = torch.baddbmm(observed, action.expand(self.n_critics, -1, -1), weights(self._first_layer())[0][:, -self.action_dim :])
+        h = torch.baddbmm(
+            observed, action.expand(self.n_critics, -1, -1), weights(self._first_layer())[0][:, -self.action_dim :]
+        )
         if len(self.body) > 0:  # the first layer was the body's; the rest of the body and the output follow
             for layer in [*self.body[1:], self.q]:
                 if isinstance(layer, EnsembleLinear):

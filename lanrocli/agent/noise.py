@@ -13,16 +13,15 @@ import torch
 logger = logging.getLogger(__name__)
 
 
-def restore_generator(generator: torch.Generator, state: Mapping[str, Any], device_type: str, seed: int, updates: int) -> None:
+def restore_generator(
+    generator: torch.Generator, state: Mapping[str, Any], device_type: str, seed: int, updates: int
+) -> None:
     """Continue the noise stream ``state`` saved on the device type that saved it; on another, start a
     stream derived from the agent's ``seed`` and update count, so that the same checkpoint loaded the same
     way gives the same numbers, and warn that the stream changed."""
     saved = state["generator"].cpu()
     saved_on = state.get("generator_device")
-    if saved_on is None:  # written before the device type was recorded: the state's size tells
-        same_kind = saved.numel() == generator.get_state().numel()
-    else:
-        same_kind = saved_on == device_type
+    same_kind = saved_on == device_type
     if same_kind:
         generator.set_state(saved)
         return
@@ -30,5 +29,8 @@ def restore_generator(generator: torch.Generator, state: Mapping[str, Any], devi
     logger.warning(
         "the agent's exploration noise was saved on %s and cannot continue on %s; it restarts from a stream "
         "derived from the agent's seed (%d) and update count (%d)",
-        saved_on or "another device type", device_type, seed, updates,
+        saved_on or "another device type",
+        device_type,
+        seed,
+        updates,
     )

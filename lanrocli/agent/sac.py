@@ -76,11 +76,27 @@ class SACAgent:
             critic_encoder = LanguageEncoder(vocab_size, s.embedding_size, s.language_size)
             actor_encoder = None if s.share_encoder else LanguageEncoder(vocab_size, s.embedding_size, s.language_size)
             self.actor = Actor(
-                obs_dim, action_dim, actor_encoder, s.language_size, s.obs_size, s.hidden_size, s.hidden_layers,
-                s.log_std_min, s.log_std_max, self.layout, s.sentence_in_trunk,
+                obs_dim,
+                action_dim,
+                actor_encoder,
+                s.language_size,
+                s.obs_size,
+                s.hidden_size,
+                s.hidden_layers,
+                s.log_std_min,
+                s.log_std_max,
+                self.layout,
+                s.sentence_in_trunk,
             ).to(self.device)
             self.critic = Critic(
-                obs_dim, action_dim, critic_encoder, s.obs_size, s.hidden_size, s.hidden_layers, s.critics, self.layout,
+                obs_dim,
+                action_dim,
+                critic_encoder,
+                s.obs_size,
+                s.hidden_size,
+                s.hidden_layers,
+                s.critics,
+                self.layout,
                 s.sentence_in_trunk,
             ).to(self.device)
         self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
@@ -146,7 +162,9 @@ class SACAgent:
         scores = self.actor.reader.scores(x, language, present)
         if self.settings.acting_attention == ActingAttention.ARGMAX:
             # Logits whose softmax is one on each row's highest score: the actor reads that object alone.
-            acting = torch.full_like(scores, torch.finfo(scores.dtype).min).scatter(-1, scores.argmax(-1, keepdim=True), 0.0)
+            acting = torch.full_like(scores, torch.finfo(scores.dtype).min).scatter(
+                -1, scores.argmax(-1, keepdim=True), 0.0
+            )
         else:
             acting = scores
         mean, _ = self.actor(x, language, present, acting)
@@ -202,19 +220,32 @@ class SACAgent:
     def _sampled_tensors(self, batch: Batch) -> SampledTensors:
         """The batch as tensors, with the policy's noise for the next states and for these, drawn from the
         agent's own stream, so the losses are a function of tensors alone."""
+
         def tensor(array: np.ndarray) -> torch.Tensor:
             return torch.as_tensor(array, device=self.device)
 
-        next_noise, noise = (torch.randn(batch.obs.shape[0], self.action_dim, generator=self.generator, device=self.device) for _ in range(2))
+        next_noise, noise = (
+            torch.randn(batch.obs.shape[0], self.action_dim, generator=self.generator, device=self.device)
+            for _ in range(2)
+        )
         return SampledTensors(
-            observations=tensor(np.concatenate([batch.obs, batch.next_obs])), action=tensor(batch.action),
-            reward=tensor(batch.reward), done=tensor(batch.done), label=tensor(batch.label), noise=noise, next_noise=next_noise,
+            observations=tensor(np.concatenate([batch.obs, batch.next_obs])),
+            action=tensor(batch.action),
+            reward=tensor(batch.reward),
+            done=tensor(batch.done),
+            label=tensor(batch.label),
+            noise=noise,
+            next_noise=next_noise,
         )
 
     def _update_encoders(self) -> list[LanguageEncoder]:
         """The encoders an update reads the sentences with, in the order :func:`sac_losses` takes their
         summaries: the critic's, the actor's own (if it has one), the target critic's."""
-        return [self.critic.encoder, *([self.actor.encoder] if self.actor.encoder is not None else []), self.target_critic.encoder]
+        return [
+            self.critic.encoder,
+            *([self.actor.encoder] if self.actor.encoder is not None else []),
+            self.target_critic.encoder,
+        ]
 
     def learn(
         self,
@@ -314,7 +345,10 @@ class SACAgent:
         """An agent rebuilt from its saved dimensions, settings and seed (0 for a state saved before the seed
         was), then loaded."""
         agent = cls(
-            state["obs_dim"], state["action_dim"], state["vocab_size"], SACSettings.from_dict(state["settings"]),
+            state["obs_dim"],
+            state["action_dim"],
+            state["vocab_size"],
+            SACSettings.from_dict(state["settings"]),
             seed=int(state.get("seed", 0)),
             device=device,
             layout=RunningNormalizer.saved_layout(state["normalizer"]),

@@ -10,8 +10,18 @@ from typing import Any, ClassVar, Literal
 
 from lanrocli.core.choices import ActingAttention
 
-UPDATE_METRICS = ("critic_loss", "actor_loss", "alpha_loss", "grounding_loss", "alpha", "q_mean", "target_q_mean", "entropy")
+UPDATE_METRICS = (
+    "critic_loss",
+    "actor_loss",
+    "alpha_loss",
+    "grounding_loss",
+    "alpha",
+    "q_mean",
+    "target_q_mean",
+    "entropy",
+)
 """The figures each update of the agent reports, in its order; ``metrics.csv`` has a column for each."""
+
 
 @dataclass(frozen=True)
 class SACSettings:
@@ -83,8 +93,16 @@ class SACSettings:
     sums round differently in the last bits, so a run is reproducible with the setting it ran with."""
 
     ARCHITECTURE: ClassVar[tuple[str, ...]] = (
-        "critics", "embedding_size", "language_size", "obs_size", "hidden_size", "hidden_layers", "architecture",
-        "share_encoder", "autotune_alpha", "sentence_in_trunk",
+        "critics",
+        "embedding_size",
+        "language_size",
+        "obs_size",
+        "hidden_size",
+        "hidden_layers",
+        "architecture",
+        "share_encoder",
+        "autotune_alpha",
+        "sentence_in_trunk",
     )
     """The settings that shape the networks and the optimiser's state: a saved agent loads only into one
     that agrees on them."""
@@ -99,7 +117,9 @@ class SACSettings:
         if not 0.0 <= self.polyak <= 1.0 or not 0.0 <= self.gamma <= 1.0:
             raise ValueError("gamma and polyak must lie in [0, 1]")
         if not self.sentence_in_trunk and self.architecture != "objects":
-            raise ValueError("sentence_in_trunk: false needs architecture 'objects': a flat network reads the sentence only there")
+            raise ValueError(
+                "sentence_in_trunk: false needs architecture 'objects': a flat network reads the sentence only there"
+            )
         if self.acting_attention not in tuple(ActingAttention):
             choices = " or ".join(repr(a.value) for a in ActingAttention)
             raise ValueError(f"acting_attention must be {choices}, got {self.acting_attention!r}")
@@ -121,7 +141,6 @@ class SACSettings:
         if unknown:
             raise ValueError(f"unknown SAC settings: {', '.join(unknown)}")
         return cls(**data)
-
 
 
 @dataclass(frozen=True)

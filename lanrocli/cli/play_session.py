@@ -3,8 +3,9 @@
 The environment draws the scene and runs the physics, but the sentence the agent reads is the person's,
 not the instructor's, and so is the object success is judged on: each typed line is read the way the
 instructor builds its sentences (an instruction, then a correction appended to it) to find the object the
-sentence singles out (:mod:`lanrocli.language.typed`). A person types what they like, so a sentence outside the grammar is read all the
-same (and flagged), and a word outside the vocabulary is read as ``<unk>`` (and named), as the agent sees it.
+sentence singles out (:mod:`lanrocli.language.typed`). A person types what they like, so a sentence outside the
+grammar is read all the same (and flagged), and a word outside the vocabulary is read as ``<unk>`` (and named),
+as the agent sees it.
 
 One protocol serves a terminal (with prompts) and a pipe (one line per read), so a script of lines plays
 the same episodes as a person typing them:
@@ -41,24 +42,23 @@ import pybullet
 from rich.console import Console
 from rich.markup import escape
 
-from lanrocli.tasks import Task
+from lanrocli.agent.policy import AgentPolicy
 from lanrocli.envs.caption import caption
 from lanrocli.envs.env import IMAGE_SIZE, LanroEnv
-from lanrocli.evaluation.evaluate import save_gif
 from lanrocli.envs.settings import CORRECTION_LIMIT, EnvSettings
+from lanrocli.evaluation.evaluate import save_gif
 from lanrocli.language import TASK_VERBS, ObjectProps
 from lanrocli.language.typed import Grammar, Utterance, unknown_words, words_of
 from lanrocli.language.vocabulary import UNK
-from lanrocli.sim import CONTROL_DT, action_size
-from lanrocli.tasks import FALLEN, task_class
-from lanrocli.train.errors import CheckpointError
 from lanrocli.pretrained import agent_path
-from lanrocli.agent.policy import AgentPolicy
+from lanrocli.sim import CONTROL_DT, action_size
+from lanrocli.tasks import FALLEN, Task, task_class
+from lanrocli.train.errors import CheckpointError
 from lanrocli.train.trainer import load_policy, pick_device
+
 
 class PlayError(Exception):
     """Something the person can put right (a checkpoint, an option, a line), said in words, not a traceback."""
-
 
 
 def name(obj: ObjectProps) -> str:
@@ -194,7 +194,9 @@ def play(path: Path, options: PlayOptions, stream: TextIO, console: Console) -> 
 class Session:
     """The episodes of one agent in one environment, as the person's lines drive them."""
 
-    def __init__(self, env: LanroEnv, policy: AgentPolicy, lines: Lines, console: Console, options: PlayOptions) -> None:
+    def __init__(
+        self, env: LanroEnv, policy: AgentPolicy, lines: Lines, console: Console, options: PlayOptions
+    ) -> None:
         self.env = env
         self.policy = policy
         self.lines = lines
@@ -224,7 +226,9 @@ class Session:
             outcomes.append(self._episode(number, observation, info, utterance))
         if outcomes:
             won = sum(o.success for o in outcomes)
-            self.say(f"{len(outcomes)} episode{'s' if len(outcomes) > 1 else ''}, {won} success{'es' if won != 1 else ''}")
+            self.say(
+                f"{len(outcomes)} episode{'s' if len(outcomes) > 1 else ''}, {won} success{'es' if won != 1 else ''}"
+            )
         return outcomes
 
     def _instruction(self, objects: Sequence[ObjectProps], first: bool) -> Utterance | None:
@@ -267,7 +271,9 @@ class Session:
         self.warn(f"the sentence singles out no object: {what}; success is judged once a correction names one")
         return None
 
-    def _episode(self, number: int, observation: dict[str, np.ndarray], info: dict[str, Any], utterance: Utterance) -> Outcome:
+    def _episode(
+        self, number: int, observation: dict[str, np.ndarray], info: dict[str, Any], utterance: Utterance
+    ) -> Outcome:
         objects = tuple(info["objects"])
         target = self._heard(utterance, utterance.instruction, objects)
         tokens = self.vocabulary.encode(utterance.text)
@@ -275,7 +281,9 @@ class Session:
         steps, limit = 0, self.env.max_episode_steps
         while True:
             for _ in range(self.options.steps_per_line):
-                observation, _, _, _, info = self.env.step(self.policy.act({**observation, "instruction": tokens}, info))
+                observation, _, _, _, info = self.env.step(
+                    self.policy.act({**observation, "instruction": tokens}, info)
+                )
                 steps += 1
                 if frames is not None:
                     frames.append(self._frame(utterance))
@@ -306,7 +314,12 @@ class Session:
         return caption(self.env.world.render(*IMAGE_SIZE), utterance.text)
 
     def _show_step(
-        self, step: int, utterance: Utterance, observation: dict[str, np.ndarray], info: dict[str, Any], target: int | None
+        self,
+        step: int,
+        utterance: Utterance,
+        observation: dict[str, np.ndarray],
+        info: dict[str, Any],
+        target: int | None,
     ) -> None:
         objects = info["objects"]
         held = [objects[i] for i in np.flatnonzero(info["achieved"])]
@@ -330,7 +343,9 @@ class Session:
     ) -> Outcome:
         goal = None if target is None else objects[target]
         if success and goal is not None:
-            self.say(f"episode {number}: success at step {steps}: the task holds for the {name(goal)}", style="bold green")
+            self.say(
+                f"episode {number}: success at step {steps}: the task holds for the {name(goal)}", style="bold green"
+            )
         else:
             why = "the goal fell off the table" if fallen else "the step limit"
             if goal is None:

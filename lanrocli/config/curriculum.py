@@ -18,9 +18,6 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
 from lanrocli.agent.settings import BufferSettings
-from lanrocli.core.choices import Kind, Split
-from lanrocli.tasks import Task
-from lanrocli.envs.scene import check_scenes
 from lanrocli.config.overrides import apply_settings
 from lanrocli.config.sections import (
     NAME_PATTERN,
@@ -31,8 +28,11 @@ from lanrocli.config.sections import (
     HoldoutConfig,
     Stage,
 )
-from lanrocli.core.seeds import FIELD
 from lanrocli.config.yamlfile import CurriculumError, KeyProblem, Problem, parse, read, validate
+from lanrocli.core.choices import Kind, Split
+from lanrocli.core.seeds import FIELD
+from lanrocli.envs.scene import check_scenes
+from lanrocli.tasks import Task
 
 __all__ = [
     "Curriculum",
@@ -132,11 +132,17 @@ class Curriculum(BaseModel):
             try:
                 check_scenes(last.mode, last.objects, rules, Split.PAIRS)
             except ValueError as error:
-                raise KeyProblem(("pairs",), f"{error}: the last stage, where the split is tested, needs a held-out pair it can put on the table") from None
+                raise KeyProblem(
+                    ("pairs",),
+                    f"{error}: the last stage, where the split is tested, "
+                    "needs a held-out pair it can put on the table",
+                ) from None
         if rules.common_ground and not last.rare_words:
             raise KeyProblem(("common_ground",), "the last stage, where the split is tested, needs rare_words: true")
         if rules.common_ground and Kind.COMMON_GROUND not in last.instructor.kinds:
-            raise KeyProblem(("common_ground",), "the last stage, where the split is tested, must allow the common_ground kind")
+            raise KeyProblem(
+                ("common_ground",), "the last stage, where the split is tested, must allow the common_ground kind"
+            )
         return holdout
 
     @property

@@ -135,8 +135,13 @@ class StageEval(BaseModel):
 
 
 STAGE_BUFFER_KEYS = (
-    "relabel_ratio", "correction_share", "hindsight_share", "relabel_corrections", "relabel_negations",
-    "fresh_targets", "ground_real",
+    "relabel_ratio",
+    "correction_share",
+    "hindsight_share",
+    "relabel_corrections",
+    "relabel_negations",
+    "fresh_targets",
+    "ground_real",
 )
 """The ``BufferSettings`` a stage may change: how batches are drawn and relabelled (``relabel_negations``
 for the episodes stored from the stage on, whose sentence pools it fills). The buffer's size is fixed when
@@ -160,7 +165,9 @@ class _StageBufferBase(BaseModel):
 
     def over(self, base: BufferSettings) -> BufferSettings:
         """``base`` with this stage's keys in place of its own."""
-        return dataclasses.replace(base, **{key: value for key, value in self.model_dump().items() if value is not None})
+        return dataclasses.replace(
+            base, **{key: value for key, value in self.model_dump().items() if value is not None}
+        )
 
 
 StageBuffer = _section(BufferSettings, "StageBuffer", _StageBufferBase, STAGE_BUFFER_KEYS)

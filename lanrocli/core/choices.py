@@ -12,6 +12,7 @@ from __future__ import annotations
 import re
 from enum import StrEnum
 
+
 class Mode(StrEnum):
     """Which properties vary between the objects of a scene."""
 

@@ -8,22 +8,24 @@ import gymnasium as gym
 import numpy as np
 
 from lanrocli.core.choices import Kind, Split
+from lanrocli.core.reward import reward
 from lanrocli.envs.instructor import Instructor
 from lanrocli.envs.scene import Scene, check_scenes, sample_scene
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.starts import place_arm
 from lanrocli.language import COLOURS, SHAPES, Vocabulary, grammar_vocabulary, max_sentence_words
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
-from lanrocli.core.reward import reward
 from lanrocli.sim import (
     MAX_STEP,
     OBJECT_AREA,
-    SHAPES as SIM_SHAPES,
     ObjectSet,
     Panda,
     World,
     action_size,
     resting_position,
+)
+from lanrocli.sim import (
+    SHAPES as SIM_SHAPES,
 )
 from lanrocli.tasks import FALLEN, ArmView, OracleMemory, TaskView, make_task
 
@@ -84,7 +86,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     object, else -1; success ends the episode (terminated), and so does the goal falling off the table
     (truncated, with ``info["fell"]``: the episode is lost, not merely out of time); another object may
     fall to the floor and the episode goes on. ``info`` carries
-    ``is_success``, ``achieved`` (per object), ``goal_index``, ``object_positions``, ``objects`` (``ObjectProps`` in observation order), ``instruction_text``,
+    ``is_success``, ``achieved`` (per object), ``goal_index``, ``object_positions``, ``objects`` (``ObjectProps``
+    in observation order), ``instruction_text``,
     ``challenge`` (the ``Kind`` of misunderstanding of a correction episode, or ``None``) and ``correction``
     (``None`` until spoken).
     """

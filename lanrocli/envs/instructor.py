@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lanrocli.core.choices import CorrectionForm, Kind, Split
+from lanrocli.envs.scene import Scene
 from lanrocli.language import (
     BEGINNING_WORDS,
     NAMING_FORMS,
@@ -30,9 +31,8 @@ from lanrocli.language import (
     instruction,
     pick,
 )
-from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.language.dialogue import candidates, naming_phrases, negation_phrases, opening_phrases
-from lanrocli.envs.scene import Scene
+from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 
 MAX_DELAY = 20
 """Most steps a correction may wait after the mistake: later, the arm has long moved on."""
@@ -63,13 +63,13 @@ class InstructorSettings:
         if not 0.0 <= self.correction_rate <= 1.0:
             raise ValueError(f"correction_rate must be within [0, 1], got {self.correction_rate}")
         if not isinstance(self.max_delay, (int, np.integer)) or not 0 <= self.max_delay <= MAX_DELAY:
-            raise ValueError(f"max_delay must be a whole number of steps within [0, {MAX_DELAY}], got {self.max_delay!r}")
+            raise ValueError(
+                f"max_delay must be a whole number of steps within [0, {MAX_DELAY}], got {self.max_delay!r}"
+            )
         try:
             kinds = tuple(Kind(k) for k in self.kinds)
         except ValueError:
-            raise ValueError(
-                f"kinds must be a subset of {[k.value for k in Kind]}, got {list(self.kinds)}"
-            ) from None
+            raise ValueError(f"kinds must be a subset of {[k.value for k in Kind]}, got {list(self.kinds)}") from None
         if not kinds:
             raise ValueError("kinds must name at least one kind of correction; leave it out to allow all kinds")
         repeated = sorted({kind.value for kind in kinds if kinds.count(kind) > 1})
@@ -77,12 +77,16 @@ class InstructorSettings:
             raise ValueError(f"kinds names {', '.join(repeated)} more than once")
         object.__setattr__(self, "kinds", kinds)
         if not isinstance(self.max_corrections, (int, np.integer)) or not 1 <= self.max_corrections <= MAX_CORRECTIONS:
-            raise ValueError(f"max_corrections must be a whole number within [1, {MAX_CORRECTIONS}], got {self.max_corrections!r}")
+            raise ValueError(
+                f"max_corrections must be a whole number within [1, {MAX_CORRECTIONS}], got {self.max_corrections!r}"
+            )
         if self.negation_rate is not None:
             if not 0.0 <= self.negation_rate <= 1.0:
                 raise ValueError(f"negation_rate must be within [0, 1], got {self.negation_rate}")
             if self.negation_rate > 0 and self.correction_rate > 0 and not self.negations:
-                raise ValueError(f"negation_rate {self.negation_rate:g} needs negations=True: without them none is spoken")
+                raise ValueError(
+                    f"negation_rate {self.negation_rate:g} needs negations=True: without them none is spoken"
+                )
         if self.correction_rate > 0 and not self.active_kinds:
             raise ValueError("kinds=['common_ground'] needs rare_words=True: without rare words there is no such case")
 
@@ -167,10 +171,14 @@ class Instructor:
         named = None
         if challenge is Kind.INSTRUCTION_CORRECTION:
             named = pick(rng, [i for i in range(len(scene.objects)) if i != scene.goal_index])
-        phrases = self.holdout.instruction_phrases(opening_phrases(challenge, scene.objects, scene.goal_index, named), self.split)
+        phrases = self.holdout.instruction_phrases(
+            opening_phrases(challenge, scene.objects, scene.goal_index, named), self.split
+        )
         if not phrases:
             name = challenge.value if challenge else "plain"
-            raise RuntimeError(f"no {name} instruction exists for goal {scene.goal} among {scene.others(scene.goal_index)}")
+            raise RuntimeError(
+                f"no {name} instruction exists for goal {scene.goal} among {scene.others(scene.goal_index)}"
+            )
         self._phrase = pick(rng, phrases)
         self.instruction_text = instruction(pick(rng, TASK_VERBS[self.task]), self._phrase)
 
@@ -220,7 +228,9 @@ class Instructor:
         index = len(self.corrections) + 1
         form = self._form(rng)
         if form is CorrectionForm.NEGATION:
-            negations = self.holdout.correction_phrases(negation_phrases(objects, goal, touched, considered), self.split)
+            negations = self.holdout.correction_phrases(
+                negation_phrases(objects, goal, touched, considered), self.split
+            )
             if negations:
                 text = correction(BEGINNING_WORDS[form][0], pick(rng, negations))
                 return Correction(self.challenge, form, text, step, triggered_at, index)

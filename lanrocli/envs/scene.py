@@ -14,7 +14,6 @@ from lanrocli.core.choices import Mode, Split
 from lanrocli.language import COLOURS, SHAPES, ObjectProps
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 
-
 SHAPE_MODE_COLOURS: tuple[str, ...] = ("red", "green", "blue")
 
 
@@ -104,8 +103,7 @@ def check_scenes(mode: Mode, n_objects: int, holdout: Holdout, split: Split | No
         missing = [need for need, met in needs.items() if not met]
         if missing:
             raise ValueError(
-                f"it leaves {where} with goal {goal.colour} {goal.shape} and no {missing[0]}: "
-                "hold out fewer pairs"
+                f"it leaves {where} with goal {goal.colour} {goal.shape} and no {missing[0]}: hold out fewer pairs"
             )
 
 

@@ -84,6 +84,7 @@ class EnvSettings:
             "corrects, drawn on top of the arm's start."
         ),
     )
+
     def __post_init__(self) -> None:
         if isinstance(self.objects, bool) or self.objects not in (2, 3):
             raise ValueError(f"objects must be 2 or 3, got {self.objects!r}")

@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lanrocli.core.choices import CorrectionForm, Instruction
-from lanrocli.evaluation.metrics import ATTENTION, FIGURE, FIGURES, PHASES, EpisodeResult, Rate, _rate
 from lanrocli.envs.instructor import MAX_CORRECTIONS
+from lanrocli.evaluation.metrics import ATTENTION, FIGURE, FIGURES, PHASES, EpisodeResult, Rate, _rate
 from lanrocli.evaluation.rollout import run_episodes
 
 if TYPE_CHECKING:
@@ -131,7 +131,9 @@ class EvaluationReport:
                 k: {**r.as_dict(), "corrected": corrected_by_kind[k].as_dict()} for k, r in self.by_kind().items()
             },
             "by_form": {form: r.as_dict() for form, r in self.by_form().items()},
-            "by_index": {str(i): self.rate(f"corrected_success_after_{i}").as_dict() for i in range(2, MAX_CORRECTIONS + 1)},
+            "by_index": {
+                str(i): self.rate(f"corrected_success_after_{i}").as_dict() for i in range(2, MAX_CORRECTIONS + 1)
+            },
             "by_negation": {k: r.as_dict() for k, r in self.by_negation().items()},
             ATTENTION: self.attention_on_goal(),
         }

@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from lanrocli.core.choices import CorrectionForm, Kind
-from lanrocli.envs.instructor import MAX_CORRECTIONS
 from lanrocli.core.registry import Live, Registry
+from lanrocli.envs.instructor import MAX_CORRECTIONS
 
 JUDGED = 30
 """Spoken corrections of one kind or form below which its success is shown but not judged: with fewer, its

@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from lanrocli.core.choices import CorrectionForm, Instruction
+from lanrocli.core.reward import reward
 from lanrocli.evaluation.metrics import PLAIN, EpisodeResult
 from lanrocli.language import TASK_VERBS, identifying_phrases, instruction, pick
-from lanrocli.core.reward import reward
 
 if TYPE_CHECKING:
     from lanrocli.envs.env import LanroEnv

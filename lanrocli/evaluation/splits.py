@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 
 from lanrocli.core.choices import Split
-from lanrocli.evaluation.metrics import FIGURE, EpisodeResult, entry
 from lanrocli.core.stats import paired_rate_difference
+from lanrocli.evaluation.metrics import FIGURE, EpisodeResult, entry
 
 
 @dataclass(frozen=True)
@@ -119,7 +119,8 @@ def split_lines(splits: dict[str, dict[str, dict[str, Any]]], ordinary: dict[str
             mine = figure.read(record)
             theirs, source = in_distribution(figure, record, ordinary.get(agent))
             lines.append(
-                f"| {figure.split.value} | {agent} | {figure.label} | {with_interval(mine)} | {with_interval(theirs)} | "
+                f"| {figure.split.value} | {agent} | {figure.label} | {with_interval(mine)} | "
+                f"{with_interval(theirs)} | "
                 f"{source if theirs else '-'} | {_points(figure, record, mine, theirs)} |"
             )
     return lines

@@ -1,8 +1,8 @@
 """A stable-baselines3 features extractor that reads lanro's instruction as a sentence.
 
 SB3's default ``MultiInputPolicy`` sees the instruction, once
-:class:`~lanrocli.integrations.wrappers.MultiDiscreteInstruction` declares it, as L one-hot words side by side: enough to
-learn from, but the same word third and fourth in a sentence are unrelated inputs to it, and a correction's
+:class:`~lanrocli.integrations.wrappers.MultiDiscreteInstruction` declares it, as L one-hot words side by side:
+enough to learn from, but the same word third and fourth in a sentence are unrelated inputs to it, and a correction's
 words stand wherever its instruction ended. :class:`LanguageExtractor` reads the words in order with lanro's
 own sentence encoder (a word embedding and a GRU), as lanro's agent does. This module imports
 stable-baselines3; :mod:`lanrocli.integrations.wrappers` does not.

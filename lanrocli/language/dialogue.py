@@ -37,7 +37,9 @@ def _others(objects: Sequence[ObjectProps], index: int) -> list[ObjectProps]:
     return [o for i, o in enumerate(objects) if i != index]
 
 
-def opening_phrases(kind: Kind | None, objects: Sequence[ObjectProps], goal: int, named: int | None = None) -> list[Phrase]:
+def opening_phrases(
+    kind: Kind | None, objects: Sequence[ObjectProps], goal: int, named: int | None = None
+) -> list[Phrase]:
     """The phrases an instruction of episode ``kind`` (``None``: a plain episode) may name the goal by.
 
     ambiguity: a phrase that fits the goal and another object; common ground: one with a rare colour word

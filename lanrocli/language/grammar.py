@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 
 import numpy as np
 
@@ -36,7 +36,7 @@ ARTICLE = "the"
 OBJECT_WORD = "object"
 
 
-class Form(str, Enum):
+class Form(StrEnum):
     """Which properties a noun phrase names."""
 
     COLOUR_SHAPE = "colour_shape"
@@ -175,7 +175,9 @@ def all_corrections(negations: bool = False) -> Iterator[tuple[str, CorrectionFo
                 yield correction(beginning, phrase), kind
 
 
-def all_sentences(task: str, corrections: bool = False, negations: bool = False, rare: bool = False) -> Iterator[Sentence]:
+def all_sentences(
+    task: str, corrections: bool = False, negations: bool = False, rare: bool = False
+) -> Iterator[Sentence]:
     """Every sentence: the instructions, or with ``corrections`` every EXTENDED INSTRUCTION."""
     if not corrections:
         for text, form in all_instructions(task, rare):

@@ -95,7 +95,10 @@ class Holdout:
         _distinct(list(words), key)
         unknown = [w for w in words if w not in known]
         if unknown:
-            raise ValueError(f"{key} holds out {what}, and {', '.join(map(repr, unknown))} is none; the {what} are {', '.join(known)}")
+            raise ValueError(
+                f"{key} holds out {what}, and {', '.join(map(repr, unknown))} is none; "
+                f"the {what} are {', '.join(known)}"
+            )
         return words
 
     @property
@@ -111,7 +114,9 @@ class Holdout:
 
     def check_split(self, split: Split | None) -> None:
         if split is not None and split not in self.splits:
-            raise ValueError(f"split {split.value!r} needs the holdout to hold something out for it; it holds {self.describe()}")
+            raise ValueError(
+                f"split {split.value!r} needs the holdout to hold something out for it; it holds {self.describe()}"
+            )
 
     # -- the rules, for training (``split`` None) and for each split ---------------------------------------
 

@@ -27,13 +27,22 @@ from typing import Any
 import numpy as np
 import yaml
 
-from lanrocli.evaluation.metrics import FIGURE, FIGURES, JUDGED, Figure
 from lanrocli.core.stats import IQM_RUNS, Estimate, bootstrap, iqm, probability_of_improvement
-from lanrocli.report.groups import Group, group_runs
+from lanrocli.evaluation.metrics import FIGURE, FIGURES, JUDGED, Figure
 from lanrocli.evaluation.splits import SPLIT_FIGURES, SplitFigure, drop, in_distribution
+from lanrocli.report.groups import Group, group_runs
 from lanrocli.train.errors import CheckpointError
-from lanrocli.train.runfolder import CONFIG, CORRECTION_TEST, LATEST, SPLITS, STATE_FILE, TEST, read_pointer, stage_folder
 from lanrocli.train.report import run_ended
+from lanrocli.train.runfolder import (
+    CONFIG,
+    CORRECTION_TEST,
+    LATEST,
+    SPLITS,
+    STATE_FILE,
+    TEST,
+    read_pointer,
+    stage_folder,
+)
 
 STEPS = "stage_steps"
 
@@ -139,7 +148,9 @@ def read_outcome(run: Path, agent: str = "last") -> RunOutcome:
         plan = yaml.safe_load(config.read_text(encoding="utf-8"))
         task, names = str(plan["task"]), [str(stage["name"]) for stage in plan["stages"]]
     except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError) as error:
-        raise ReportError(f"{run} is not a run folder with a readable {CONFIG} ({type(error).__name__}: {error})") from None
+        raise ReportError(
+            f"{run} is not a run folder with a readable {CONFIG} ({type(error).__name__}: {error})"
+        ) from None
     try:
         state = json.loads((read_pointer(run / LATEST) / STATE_FILE).read_text())
         results = state["extra"]["run"]["results"]
@@ -171,7 +182,12 @@ class Cell:
     """False for a kind or form some run heard fewer than ``JUDGED`` spoken corrections of."""
 
     def to_dict(self) -> dict[str, Any]:
-        data: dict[str, Any] = {"mean": self.mean.value, "ci": list(self.mean.ci), "runs": self.mean.runs, "values": self.values}
+        data: dict[str, Any] = {
+            "mean": self.mean.value,
+            "ci": list(self.mean.ci),
+            "runs": self.mean.runs,
+            "values": self.values,
+        }
         if self.iqm is not None:
             data |= {"iqm": self.iqm.value, "iqm_ci": list(self.iqm.ci)}
         if self.fewest is not None:

@@ -2,24 +2,26 @@
 
 Runs whose resolved curricula (``config.yaml``) are equal but for the seed and the name are one group: the
 seeds of one setting. Each ``config.yaml`` is read through the current curriculum schema, so a setting added
-since an older run was trained reads as its default there, not as a difference. Groups are named by the keys on which they differ (``agent.critics=2``), in the key paths of
+since an older run was trained reads as its default there, not as a difference. Groups are named by the keys
+on which they differ (``agent.critics=2``), in the key paths of
 ``--set``; so the trials of a grid fall into one group per grid setting, and run folders trained one by one
 group the same way. Runs without a ``config.yaml`` (a bare ``metrics.csv``) form one group of their own.
 """
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from lanrocli.sweep.plan import SWEEP_FILE, SweepSpec
 from lanrocli.config.curriculum import Curriculum
 from lanrocli.config.overrides import flatten, show
-from lanrocli.train.runfolder import CONFIG
 from lanrocli.config.yamlfile import CurriculumError, validate
+from lanrocli.sweep.plan import SWEEP_FILE, SweepSpec
+from lanrocli.train.runfolder import CONFIG
 
 IGNORED = ("seed", "name")
 """Keys whose values vary within a group: the name labels a curriculum and sets nothing."""
@@ -60,10 +62,8 @@ def _signature(run: Path) -> dict[str, Any] | None:
         data = yaml.safe_load(config.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
         raise ValueError(f"{config} cannot be read: {error}") from None
-    try:
+    with contextlib.suppress(CurriculumError):  # one this version no longer reads is compared as written
         data = validate(Curriculum, data, {}, config).model_dump(mode="json")
-    except CurriculumError:
-        pass  # a curriculum this version no longer reads is compared as written
     return {key: _plain(value) for key, value in flatten(data).items() if key not in IGNORED}
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from lanrocli.evaluation.metrics import JUDGED
 from lanrocli.core.stats import CONFIDENCE, IQM_RUNS, REPS, Estimate
+from lanrocli.evaluation.metrics import JUDGED
 from lanrocli.report.aggregate import METRICS, STEPS, GroupReport, Report, StageKey
 
 
@@ -69,7 +69,9 @@ def _row(report: Report, key: StageKey, metric: str, label: str, use_iqm: bool) 
         cells.append(text)
         if number:
             comparison = None if use_iqm else report.comparisons.get((key, metric, number))
-            cells.append("" if comparison is None else f"{comparison.value:.2f} [{comparison.low:.2f}, {comparison.high:.2f}]")
+            cells.append(
+                "" if comparison is None else f"{comparison.value:.2f} [{comparison.low:.2f}, {comparison.high:.2f}]"
+            )
     return cells if found else None
 
 

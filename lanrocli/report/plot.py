@@ -171,8 +171,15 @@ def plot_groups(groups: Sequence[tuple[str, Sequence[Path]]], out: Path, title: 
             for step, stage in median_boundaries(curves):
                 axis.axvline(step, color=line, linestyle="--", linewidth=0.8)
                 axis.text(
-                    step, 0.97, stage, transform=axis.get_xaxis_transform(), fontsize=7, color=line, rotation=90,
-                    va="top", ha="right",
+                    step,
+                    0.97,
+                    stage,
+                    transform=axis.get_xaxis_transform(),
+                    fontsize=7,
+                    color=line,
+                    rotation=90,
+                    va="top",
+                    ha="right",
                 )
         if not drawn:
             axis.text(0.5, 0.5, "no such episodes evaluated", transform=axis.transAxes, ha="center", color="grey")
@@ -182,7 +189,9 @@ def plot_groups(groups: Sequence[tuple[str, Sequence[Path]]], out: Path, title: 
         axis.set_xlim(left=0)
         axis.grid(alpha=0.3)
     axes[0].set_ylabel("success rate")
-    axes[0].legend(loc="lower right", title="band: 95% bootstrap interval" if any(len(c) > 1 for _, c in read) else None)
+    axes[0].legend(
+        loc="lower right", title="band: 95% bootstrap interval" if any(len(c) > 1 for _, c in read) else None
+    )
     runs = [curve for _, curves in read for curve in curves]
     figure.suptitle(title or ", ".join(c.name for c in runs))
     figure.tight_layout()

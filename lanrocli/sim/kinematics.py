@@ -55,9 +55,7 @@ class ArmIK:
         self._solve = client.calculateInverseKinematics
         self._jacobian = client.calculateJacobian
 
-    def solve(
-        self, target: Sequence[float], joint_positions: Sequence[float]
-    ) -> npt.NDArray[np.float64]:
+    def solve(self, target: Sequence[float], joint_positions: Sequence[float]) -> npt.NDArray[np.float64]:
         """Arm joint angles (rad) reaching ``target`` from the current ``joint_positions``.
 
         ``joint_positions`` lists every movable joint (arm and fingers), as PyBullet's

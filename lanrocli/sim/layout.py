@@ -30,10 +30,7 @@ class Box:
     def contains(self, point: npt.ArrayLike, tolerance: float = 0.0) -> bool:
         """Whether ``point`` lies inside the box grown by ``tolerance`` on every side."""
         p = np.asarray(point, dtype=np.float64)
-        return bool(
-            np.all(p >= np.asarray(self.low) - tolerance)
-            and np.all(p <= np.asarray(self.high) + tolerance)
-        )
+        return bool(np.all(p >= np.asarray(self.low) - tolerance) and np.all(p <= np.asarray(self.high) + tolerance))
 
 
 PHYSICS_HZ = 500

@@ -152,13 +152,9 @@ class ObjectSet:
         if shape not in self._collision_shapes:
             spec = SHAPES[shape]
             if spec.geometry == pybullet.GEOM_CYLINDER:
-                uid = self._client.createCollisionShape(
-                    spec.geometry, radius=spec.radius, height=spec.height
-                )
+                uid = self._client.createCollisionShape(spec.geometry, radius=spec.radius, height=spec.height)
             else:
-                uid = self._client.createCollisionShape(
-                    spec.geometry, halfExtents=spec.half_extents
-                )
+                uid = self._client.createCollisionShape(spec.geometry, halfExtents=spec.half_extents)
             self._collision_shapes[shape] = int(uid)
         return self._collision_shapes[shape]
 
@@ -172,9 +168,7 @@ class ObjectSet:
                     spec.geometry, radius=spec.radius, length=spec.height, rgbaColor=rgba
                 )
             else:
-                uid = self._client.createVisualShape(
-                    spec.geometry, halfExtents=spec.half_extents, rgbaColor=rgba
-                )
+                uid = self._client.createVisualShape(spec.geometry, halfExtents=spec.half_extents, rgbaColor=rgba)
             self._visual_shapes[key] = int(uid)
         return self._visual_shapes[key]
 
@@ -231,9 +225,7 @@ class ObjectSet:
         self._reset_velocity(body, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
         self._world.invalidate()
 
-    def reset_poses(
-        self, positions: npt.ArrayLike, orientations: npt.ArrayLike | None = None
-    ) -> None:
+    def reset_poses(self, positions: npt.ArrayLike, orientations: npt.ArrayLike | None = None) -> None:
         """Teleport all objects (rows in spawn order) and zero their velocities."""
         pos = np.asarray(positions, dtype=np.float64).reshape(len(self._objects), 3)
         if orientations is None:

@@ -196,9 +196,7 @@ class Panda:
 
     def clear_of(self, body_ids: Sequence[int], margin: float) -> bool:
         """Whether every part of the arm is at least ``margin`` (m) away from each body in ``body_ids``."""
-        return not any(
-            self._get_closest(bodyA=self.body_id, bodyB=body, distance=margin) for body in body_ids
-        )
+        return not any(self._get_closest(bodyA=self.body_id, bodyB=body, distance=margin) for body in body_ids)
 
     def _command(self, positions: Sequence[float]) -> None:
         self._set_motors(
@@ -224,9 +222,7 @@ class Panda:
         """
         values = np.asarray(action, dtype=np.float64).reshape(-1)
         if values.shape[0] != self.action_size:
-            raise ValueError(
-                f"expected an action of size {self.action_size}, got {values.shape[0]}"
-            )
+            raise ValueError(f"expected an action of size {self.action_size}, got {values.shape[0]}")
         if not np.isfinite(values).all():
             raise ValueError(f"action must be finite, got {values}")
         if self._gripper:

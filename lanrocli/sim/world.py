@@ -21,10 +21,10 @@ from pybullet_utils.bullet_client import BulletClient
 from lanrocli.sim.camera import Camera, CameraPose
 from lanrocli.sim.layout import (
     CONTROL_DT,
+    FLOOR_HEIGHT,
     GRAVITY,
     SOLVER_ITERATIONS,
     SUBSTEPS,
-    FLOOR_HEIGHT,
     TABLE_CENTRE,
     TABLE_HALF_EXTENTS,
     TABLE_LATERAL_FRICTION,
@@ -94,9 +94,7 @@ class World:
     def _create_table(self) -> int:
         client = self._client
         collision = client.createCollisionShape(pybullet.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS)
-        visual = client.createVisualShape(
-            pybullet.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=TABLE_RGBA
-        )
+        visual = client.createVisualShape(pybullet.GEOM_BOX, halfExtents=TABLE_HALF_EXTENTS, rgbaColor=TABLE_RGBA)
         table = client.createMultiBody(
             baseMass=0.0,
             baseCollisionShapeIndex=collision,

@@ -55,7 +55,11 @@ class SweepDisplay(SweepObserver):
         for row in self.rows.values():
             rate = "-" if row.rate is None or row.status != RUNNING else f"{row.rate:.0f}"
             table.add_row(
-                escape(row.trial), escape(row.stage or "-"), f"{row.steps:,}", rate, escape(row.evaluation or "-"),
+                escape(row.trial),
+                escape(row.stage or "-"),
+                f"{row.steps:,}",
+                rate,
+                escape(row.evaluation or "-"),
                 f"[{STYLES.get(row.status, 'dim')}]{escape(row.status)}[/]",
             )
         return table
@@ -63,7 +67,9 @@ class SweepDisplay(SweepObserver):
     def update(self, progress: TrialProgress) -> None:
         known = self.rows.get(progress.trial)
         if known is not None and progress.status in (RUNNING, FAILED) and not progress.stage:
-            progress = TrialProgress(progress.trial, progress.status, known.stage, known.steps, known.rate, known.evaluation, progress.line)
+            progress = TrialProgress(
+                progress.trial, progress.status, known.stage, known.steps, known.rate, known.evaluation, progress.line
+            )
         self.rows[progress.trial] = progress
         if self._live is not None:
             self._live.update(self._table())
@@ -76,8 +82,10 @@ class SweepDisplay(SweepObserver):
             self._next_line[progress.trial] = now + PLAIN_INTERVAL
             rate = "-" if progress.rate is None else f"{progress.rate:.0f}"
             self.console.print(
-                escape(f"[{progress.trial}] stage {progress.stage}: {progress.steps:,} steps, {rate} steps/s, "
-                       f"last evaluation {progress.evaluation or '-'}")
+                escape(
+                    f"[{progress.trial}] stage {progress.stage}: {progress.steps:,} steps, {rate} steps/s, "
+                    f"last evaluation {progress.evaluation or '-'}"
+                )
             )
 
     def note(self, message: str) -> None:
@@ -97,7 +105,9 @@ def print_outcome(console: Console, statuses: dict[str, str], errors: dict[str, 
     console.print(f"{done} of {len(statuses)} trials finished; sweep folder: {out}", highlight=False)
     if done < len(statuses):
         stopped = any(status == STOPPED for status in statuses.values())
-        console.print(f"{'stopped; ' if stopped else ''}resume with: {resume_command(out)}", markup=False, highlight=False)
+        console.print(
+            f"{'stopped; ' if stopped else ''}resume with: {resume_command(out)}", markup=False, highlight=False
+        )
         return 1 if any(status == FAILED for status in statuses.values()) else 130
     folder = shlex.quote(str(out))
     console.print(f"next: lanro report {folder}   lanro plot {folder} --out curves.png", markup=False, highlight=False)

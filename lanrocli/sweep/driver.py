@@ -11,12 +11,12 @@ from pathlib import Path
 
 from rich.console import Console
 
-from lanrocli.train.stop import StopRequest
+from lanrocli.config.curriculum import Curriculum
+from lanrocli.sweep.display import SweepDisplay
 from lanrocli.sweep.execute import Resources, SweepOutcome, ray_instance, run_sweep
 from lanrocli.sweep.plan import RAY_FOLDER, STOP_FILE, Trial, trial_jobs
 from lanrocli.sweep.protocol import ENDED_BEFORE, PENDING, TrialProgress
-from lanrocli.sweep.display import SweepDisplay
-from lanrocli.config.curriculum import Curriculum
+from lanrocli.train.stop import StopRequest
 
 
 def run_trials(

@@ -77,7 +77,9 @@ class Resources:
 
     def __str__(self) -> str:
         where = f"the Ray cluster at {self.address}" if self.address else f"a local Ray instance ({self.cpus:g} CPUs)"
-        each = f"{self.cpus_per_trial:g} CPU(s)" + (f" and {self.gpus_per_trial:g} GPU(s)" if self.gpus_per_trial else "")
+        each = f"{self.cpus_per_trial:g} CPU(s)" + (
+            f" and {self.gpus_per_trial:g} GPU(s)" if self.gpus_per_trial else ""
+        )
         return f"{where}, {each} each" + (f", at most {self.max_concurrent} at once" if self.max_concurrent else "")
 
 
@@ -113,7 +115,9 @@ class _Monitor(tune.Callback):
         self.running.add(trial.config["trial"])
         self.observer.update(TrialProgress(trial.config["trial"], RUNNING, line="started"))
 
-    def on_trial_result(self, iteration: int, trials: list[Any], trial: Any, result: dict[str, Any], **info: Any) -> None:
+    def on_trial_result(
+        self, iteration: int, trials: list[Any], trial: Any, result: dict[str, Any], **info: Any
+    ) -> None:
         self.observer.update(TrialProgress.from_dict(result))
 
     def on_trial_complete(self, iteration: int, trials: list[Any], trial: Any, **info: Any) -> None:

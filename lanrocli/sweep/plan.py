@@ -26,12 +26,12 @@ from typing import Any
 
 import yaml
 
-from lanrocli.sweep.protocol import TrialJob
 from lanrocli.config.curriculum import Curriculum, CurriculumError
 from lanrocli.config.overrides import apply_settings, parse_key, read_settings, read_value, show, split_setting
+from lanrocli.config.yamlfile import Problem
+from lanrocli.sweep.protocol import TrialJob
 from lanrocli.train.report import run_ended
 from lanrocli.train.writing import LOCK, write_text
-from lanrocli.config.yamlfile import Problem
 
 SWEEP_FILE = "sweep.yaml"
 STOP_FILE = ".stop"
@@ -139,7 +139,9 @@ class SweepSpec:
         for trial in self.trials():
             data = copy.deepcopy(self.plan)
             data["seed"] = trial.seed
-            settings = [("--set", k, v) for k, v in self.changes.items()] + [("--grid", k, v) for k, v in trial.settings.items()]
+            settings = [("--set", k, v) for k, v in self.changes.items()] + [
+                ("--grid", k, v) for k, v in trial.settings.items()
+            ]
             try:
                 resolved.append((trial, apply_settings(Curriculum, data, settings, self.curriculum)))
             except CurriculumError as error:
@@ -231,7 +233,9 @@ def open_sweep(out: Path, spec: SweepSpec | None, resume: bool) -> SweepSpec:
     if spec is None:
         raise SweepError("give a curriculum file to start a sweep")
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise SweepError(f"{out} is not empty. Continue the sweep there with --resume, or choose another folder with --out.")
+        raise SweepError(
+            f"{out} is not empty. Continue the sweep there with --resume, or choose another folder with --out."
+        )
     out.mkdir(parents=True, exist_ok=True)
     write_text(record, spec.to_yaml())
     return spec

@@ -14,15 +14,15 @@ import torch
 import yaml
 from ray import tune
 
-from lanrocli.train.progress import StepRate, evaluation_summary, stage_end_line
+from lanrocli.config.curriculum import Curriculum
+from lanrocli.config.sections import Stage
+from lanrocli.config.yamlfile import validate
 from lanrocli.sweep.plan import trial_started
 from lanrocli.sweep.protocol import FINISHED, RUNNING, STOPPED, StopFile, TrialJob, TrialProgress
-from lanrocli.config.curriculum import Curriculum
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
+from lanrocli.train.progress import StepRate, evaluation_summary, stage_end_line
 from lanrocli.train.runstate import StageResult
-from lanrocli.config.sections import Stage
 from lanrocli.train.writing import lock_holder
-from lanrocli.config.yamlfile import validate
 
 REPORT_SECONDS = 5.0
 """Seconds between progress reports; evaluations and stage ends are reported at once."""

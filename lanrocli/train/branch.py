@@ -20,12 +20,12 @@ from pathlib import Path
 import torch
 
 from lanrocli.config.curriculum import Curriculum, CurriculumError, diff_curricula, load_curriculum
+from lanrocli.config.sections import Stage
 from lanrocli.train.errors import CheckpointError, RunError
 from lanrocli.train.pipeline import CurriculumRun, RunObserver, claim_folder
 from lanrocli.train.recovery import clear_leftovers, released_on_error, restore_metrics
 from lanrocli.train.runfolder import CONFIG, LAST, METRICS, read_pointer, stage_folder
 from lanrocli.train.runstate import RunState
-from lanrocli.config.sections import Stage
 from lanrocli.train.trainer import Trainer
 from lanrocli.train.writing import TMP_PREFIX, write_text
 
@@ -51,11 +51,15 @@ def branch_point(source: Curriculum, variant: Curriculum) -> int:
     shared = zip(source.stages, variant.stages)
     index = next((i for i, (old, new) in enumerate(shared) if old != new), min(len(source.stages), len(variant.stages)))
     if index == 0:
-        raise RunError("the curriculum given now differs from the run's in its first stage: there is nothing to "
-                       "start from. Start a new run without --from.")
+        raise RunError(
+            "the curriculum given now differs from the run's in its first stage: there is nothing to "
+            "start from. Start a new run without --from."
+        )
     if index >= len(variant.stages):
-        raise RunError(f"the curriculum given now has no stage after the run's first {index}: there is nothing new "
-                       "to train. Add or change a stage.")
+        raise RunError(
+            f"the curriculum given now has no stage after the run's first {index}: there is nothing new "
+            "to train. Add or change a stage."
+        )
     return index
 
 

@@ -77,12 +77,16 @@ class Checkpoint:
 
 def state_to_json(state: dict[str, Any]) -> dict[str, Any]:
     """A numpy bit-generator state for JSON: its 128-bit integers become strings, which every reader keeps."""
-    return {k: state_to_json(v) if isinstance(v, dict) else (str(v) if isinstance(v, int) else v) for k, v in state.items()}
+    return {
+        k: state_to_json(v) if isinstance(v, dict) else (str(v) if isinstance(v, int) else v) for k, v in state.items()
+    }
 
 
 def state_from_json(state: dict[str, Any]) -> dict[str, Any]:
     return {
-        k: state_from_json(v) if isinstance(v, dict) else (int(v) if isinstance(v, str) and v.lstrip("-").isdigit() else v)
+        k: state_from_json(v)
+        if isinstance(v, dict)
+        else (int(v) if isinstance(v, str) and v.lstrip("-").isdigit() else v)
         for k, v in state.items()
     }
 

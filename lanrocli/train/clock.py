@@ -37,7 +37,9 @@ class PhaseClock:
             return work / seconds if seconds > 0 else None
 
         work = (
-            (env_steps, self.collection_s), (self.updates, self.update_s), (self.evaluation_steps, self.evaluation_s)
+            (env_steps, self.collection_s),
+            (self.updates, self.update_s),
+            (self.evaluation_steps, self.evaluation_s),
         )
         return {phase: per_second(done, seconds) for phase, (done, seconds) in zip(RATES, work)}
 

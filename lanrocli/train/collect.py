@@ -186,7 +186,9 @@ class Collector:
     def _new_partial(info: dict[str, Any], i: int) -> _Partial:
         objects = tuple(ObjectProps.from_indices(colour, shape) for colour, shape in info["objects"][i])
         return _Partial(
-            goal_index=int(info["goal_index"][i]), objects=objects, correction_episode=bool(info["correction_episode"][i])
+            goal_index=int(info["goal_index"][i]),
+            objects=objects,
+            correction_episode=bool(info["correction_episode"][i]),
         )
 
     @property
@@ -197,7 +199,14 @@ class Collector:
         """Put back the steps each environment's current episode had when the checkpoint was written."""
         for i, data in enumerate(partials):
             p = self._partials[i]
-            for key in ("observations", "instructions", "next_observations", "next_instructions", "actions", "achieved"):
+            for key in (
+                "observations",
+                "instructions",
+                "next_observations",
+                "next_instructions",
+                "actions",
+                "achieved",
+            ):
                 setattr(p, key, list(data[key]))
             p.rewards = list(map(float, data["rewards"]))
             p.terminated = list(map(bool, data["terminated"]))
@@ -212,7 +221,7 @@ class Collector:
             t = len(p.actions)
 
             def rows(values: list, dtype: type, *shape: int) -> np.ndarray:
-                return np.array(values, dtype=dtype).reshape(t, *shape)
+                return np.array(values, dtype=dtype).reshape(t, *shape)  # noqa: B023 - called within this iteration
 
             out.append(
                 {

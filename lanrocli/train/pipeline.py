@@ -26,8 +26,10 @@ from typing import Any
 import torch
 
 from lanrocli.agent.settings import UPDATE_METRICS
-from lanrocli.evaluation.evaluate import EvaluationReport
 from lanrocli.config.curriculum import Curriculum, diff_curricula
+from lanrocli.config.sections import Stage
+from lanrocli.core.seeds import evaluation_seed
+from lanrocli.evaluation.evaluate import EvaluationReport
 from lanrocli.train.errors import RunError
 from lanrocli.train.recovery import (
     clear_leftovers,
@@ -38,6 +40,7 @@ from lanrocli.train.recovery import (
     resumable_candidates,
     saved_plan,
 )
+from lanrocli.train.report import write_report
 from lanrocli.train.runfolder import (
     CONFIG,
     LATEST,
@@ -49,10 +52,7 @@ from lanrocli.train.runfolder import (
     stage_folder,
     step_checkpoint,
 )
-from lanrocli.train.report import write_report
 from lanrocli.train.runstate import RunState, StageResult, pooled_rule, watched
-from lanrocli.config.sections import Stage
-from lanrocli.core.seeds import evaluation_seed
 from lanrocli.train.tensorboard import TensorBoard
 from lanrocli.train.testset import TestsStopped, measure_stage
 from lanrocli.train.trainer import Trainer, TrainSettings
@@ -69,7 +69,6 @@ class RunObserver:
     def on_evaluation(self, run: CurriculumRun, row: dict[str, Any]) -> None: ...
 
     def on_stage_end(self, run: CurriculumRun, result: StageResult) -> None: ...
-
 
 
 class CurriculumRun:
@@ -151,12 +150,13 @@ class CurriculumRun:
             try:
                 saved = restore_files(out, directory, extra, notes)
                 if curriculum is not None:
-                    changes = diff_curricula(saved, curriculum, f"{out / CONFIG} (the run's)", "the curriculum given now")
+                    changes = diff_curricula(
+                        saved, curriculum, f"{out / CONFIG} (the run's)", "the curriculum given now"
+                    )
                     if changes:
                         raise RunError(
                             "the curriculum differs from the one this run was started with, so it was not resumed. "
-                            "Resume with the same file and options, or start a new run with another --out.\n"
-                            + changes
+                            "Resume with the same file and options, or start a new run with another --out.\n" + changes
                         )
             except BaseException:
                 trainer.close()
@@ -267,7 +267,10 @@ class CurriculumRun:
     def _enter(self, index: int) -> None:
         evaluation = self.curriculum.evaluation(index)
         self.trainer.enter_stage(
-            self.curriculum.stages[index].env.settings(), index, evaluation.episodes, evaluation.correction_rate,
+            self.curriculum.stages[index].env.settings(),
+            index,
+            evaluation.episodes,
+            evaluation.correction_rate,
             self.curriculum.buffer_settings(index),
         )
 
@@ -326,7 +329,9 @@ def claim_folder(out: Path) -> tuple[RunLock, list[str]]:
     with released_on_error(lock):
         entries = [entry for entry in out.iterdir() if entry.name != LOCK]
         if not all(is_leftover(entry) for entry in entries):
-            raise RunError(f"{out} is not empty. Continue the run there with --resume, or choose another folder with --out.")
+            raise RunError(
+                f"{out} is not empty. Continue the run there with --resume, or choose another folder with --out."
+            )
     return lock, [f"{out} held a run stopped before its first checkpoint: starting it over"] if entries else []
 
 

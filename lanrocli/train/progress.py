@@ -23,7 +23,8 @@ def percent(value: Any) -> str:
 
 def evaluation_summary(row: dict[str, Any]) -> str:
     """An evaluation's row of ``metrics.csv`` in words: ``success 88%, corrected 70% of 20``."""
-    return f"success {percent(row['success'])}, corrected {percent(row['corrected_success'])} of {row['corrected_episodes']}"
+    corrected = f"corrected {percent(row['corrected_success'])} of {row['corrected_episodes']}"
+    return f"success {percent(row['success'])}, {corrected}"
 
 
 def stage_end_line(result: StageResult, rates: dict[str, float | None] | None = None) -> str:
@@ -58,5 +59,3 @@ class StepRate:
             self._samples.pop(0)
         (t0, s0), (t1, s1) = self._samples[0], self._samples[-1]
         return (s1 - s0) / (t1 - t0) if t1 > t0 else None
-
-

@@ -152,7 +152,9 @@ def newest_whole(out: Path, candidates: list[Path], load: Callable[[Path], Loade
             )
         moved = set_aside(out, steps)
         if moved:
-            notes.append(f"{len(moved)} checkpoint(s) written after it were moved to {out / SET_ASIDE}; delete them when done")
+            notes.append(
+                f"{len(moved)} checkpoint(s) written after it were moved to {out / SET_ASIDE}; delete them when done"
+            )
         if problems or moved:
             repoint(out, directory)
         return directory, loaded, notes
@@ -182,7 +184,9 @@ def restore_files(out: Path, directory: Path, extra: dict[str, Any], notes: list
         config = out / CONFIG
         current = config.read_text() if config.is_file() else None
         if current != copies[CONFIG]:
-            notes.append(f"{config} was {'changed' if current is not None else 'missing'}: restored from the checkpoint")
+            notes.append(
+                f"{config} was {'changed' if current is not None else 'missing'}: restored from the checkpoint"
+            )
             write_text(config, copies[CONFIG])
     restore_metrics(out, directory, extra, notes)
     try:

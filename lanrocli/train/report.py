@@ -8,11 +8,11 @@ import math
 from pathlib import Path
 from typing import Any
 
+from lanrocli.config.curriculum import Curriculum
 from lanrocli.core.choices import Kind
 from lanrocli.evaluation.metrics import ATTENTION, FIGURES, JUDGED, PHASES
-from lanrocli.train.clock import RATES
-from lanrocli.config.curriculum import Curriculum
 from lanrocli.evaluation.splits import split_lines, with_interval
+from lanrocli.train.clock import RATES
 from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, REPORT, SPLITS, TEST, stage_folder
 from lanrocli.train.runstate import RunState
 
@@ -160,7 +160,8 @@ def correction_test_lines(records: dict[str, dict[str, Any]]) -> list[str]:
         met = "" if r["quota_met"] else ", quota not met"
         lines.append(
             f"| {agent} ({r['checkpoint'].split('/')[-1]}) | {r['episodes']}{met} | {with_interval(r['corrected'])} | "
-            + " | ".join(cells) + " |"
+            + " | ".join(cells)
+            + " |"
         )
     attention = {agent: r[ATTENTION] for agent, r in records.items() if r.get(ATTENTION)}
     if attention:

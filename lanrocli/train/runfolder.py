@@ -26,6 +26,7 @@ This module loads neither torch nor pybullet, so plotting and reading a run fold
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import os
 import re
@@ -34,8 +35,8 @@ from pathlib import Path
 from typing import Any
 
 from lanrocli.agent.settings import UPDATE_METRICS
-from lanrocli.evaluation.metrics import METRIC_NAMES
 from lanrocli.core.registry import Live
+from lanrocli.evaluation.metrics import METRIC_NAMES
 from lanrocli.train.errors import CheckpointError
 from lanrocli.train.writing import fsync_dir, fsync_file, temporary
 
@@ -61,8 +62,18 @@ BEST_CHECKPOINT = re.compile(r"best-(\d+)")
 
 METRIC_COLUMNS: Live[str] = Live(
     lambda: (
-        "stage", "stage_name", "env_steps", "stage_steps", "wall_time", *METRIC_NAMES, "mean_return", "mean_length",
-        "train_success", "rule_value", "rule_holds", *UPDATE_METRICS,
+        "stage",
+        "stage_name",
+        "env_steps",
+        "stage_steps",
+        "wall_time",
+        *METRIC_NAMES,
+        "mean_return",
+        "mean_length",
+        "train_success",
+        "rule_value",
+        "rule_holds",
+        *UPDATE_METRICS,
     )
 )
 """The columns this version writes: read from the figures registered when a row is written."""
@@ -135,10 +146,8 @@ def _pointed(folder: Path, *names: str) -> list[Path]:
     """What the pointers ``names`` of ``folder`` name now (a damaged pointer names nothing)."""
     targets = []
     for name in names:
-        try:
+        with contextlib.suppress(CheckpointError):
             targets.append(read_pointer(folder / name))
-        except CheckpointError:
-            pass
     return targets
 
 

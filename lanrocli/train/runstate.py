@@ -6,10 +6,10 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
+from lanrocli.config.sections import Promote, Stage
 from lanrocli.evaluation.evaluate import EvaluationReport
 from lanrocli.evaluation.metrics import Rate, wilson_interval
 from lanrocli.train.clock import PhaseClock
-from lanrocli.config.sections import Promote, Stage
 
 
 @dataclass
@@ -77,7 +77,6 @@ class RunState:
         results = [StageResult.from_dict(r) for r in data.get("results", [])]
         window = [(int(k), int(n)) for k, n in data.get("window", [])]
         return cls(**{**{k: v for k, v in data.items() if k in known}, "results": results, "window": window})
-
 
 
 def watched(stage: Stage, report: EvaluationReport) -> Rate:

@@ -25,10 +25,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from lanrocli.evaluation.metrics import METRIC_NAMES
-from lanrocli.core.registry import Live
 from lanrocli.config.curriculum import Curriculum
 from lanrocli.config.overrides import flatten
+from lanrocli.core.registry import Live
+from lanrocli.evaluation.metrics import METRIC_NAMES
 
 TRAIN_POINTS = 5
 """Points of the ``train/`` group per evaluation interval: a curve between evaluations, not one per step."""

@@ -20,18 +20,18 @@ from typing import Any
 
 import torch
 
+from lanrocli.agent.policy import AgentPolicy
 from lanrocli.core.choices import ActingAttention, Instruction, Kind, Split
+from lanrocli.core.seeds import correction_test_seed, held_out_seed, split_test_seed
 from lanrocli.envs.env import LanroEnv
-from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.workers import make_envs
+from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
+from lanrocli.evaluation.quota import CORRECTION_QUOTA, CorrectionQuota
+from lanrocli.evaluation.splits import CONTROL, CONTROLLED, DROP, paired_drops
 from lanrocli.language.vocabulary import unlearned_words
 from lanrocli.train.checkpoint import resolve_checkpoint
-from lanrocli.evaluation.splits import CONTROL, CONTROLLED, DROP, paired_drops
-from lanrocli.evaluation.quota import CORRECTION_QUOTA, CorrectionQuota
 from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, SPLITS
-from lanrocli.core.seeds import correction_test_seed, held_out_seed, split_test_seed
-from lanrocli.agent.policy import AgentPolicy
 from lanrocli.train.trainer import TrainSettings, load_policy
 
 CORRECTION_TEST_NEGATION_RATE = 0.5
@@ -231,7 +231,10 @@ def split_test(
     loaded = _load(path, device, split_changes(split), check, split, acting_attention)
     first = split_test_seed(loaded.settings.seed, loaded.settings.stage, split)
     report = _run(loaded, episodes, first, progress=progress)
-    record = {**_record(loaded, {"split": split.value, "first_seed": first}, Instruction.TRUE, report), "split": split.value}
+    record = {
+        **_record(loaded, {"split": split.value, "first_seed": first}, Instruction.TRUE, report),
+        "split": split.value,
+    }
     if split in CONTROLLED:
         control = replace(loaded, split=None)
         played = _run(control, episodes, first, progress=progress)
@@ -280,7 +283,9 @@ def measure_stage(
         }
         record[LANGUAGE] = records(language)
         quota = CORRECTION_QUOTA.scaled(episodes)
-        corrections = once_per_agent(folder, agents, lambda path: correction_test(path, quota, device, progress=progress))
+        corrections = once_per_agent(
+            folder, agents, lambda path: correction_test(path, quota, device, progress=progress)
+        )
         record[CORRECTION_TEST] = records(corrections)
         measured = {LANGUAGE: language, CORRECTION_TEST: corrections}
         if splits:
@@ -305,9 +310,7 @@ def _split_tests(
     return once_per_agent(folder, agents, lambda path: split_test(path, split, episodes, device, progress))
 
 
-def once_per_agent(
-    folder: Path, names: list[str], measured: Callable[[Path], Measurement]
-) -> dict[str, Measurement]:
+def once_per_agent(folder: Path, names: list[str], measured: Callable[[Path], Measurement]) -> dict[str, Measurement]:
     """``measured`` of each pointer of ``names`` in a stage's ``folder``, measured once per agent: ``best``
     taken at the stage's last evaluation is the ``last`` agent (the same step, the same weights), and its
     measurement is the other's, its record under its own checkpoint name."""

@@ -22,19 +22,18 @@ import torch
 
 from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
 from lanrocli.agent.networks import ObjectLayout
+from lanrocli.agent.policy import AgentPolicy
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.core.choices import check_device
-from lanrocli.tasks import Task
 from lanrocli.envs.env import ARM_SIZE, OBJECT_SIZE, LanroEnv, observation_size
-from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.workers import EnvWorker, make_envs
+from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.language import Vocabulary, agent_vocabulary, grammar_vocabulary
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.sim import action_size
-from lanrocli.tasks import task_class
-from lanrocli.agent.policy import AgentPolicy
+from lanrocli.tasks import Task, task_class
 from lanrocli.train.checkpoint import Checkpoint, load_checkpoint, resolve_checkpoint, save_checkpoint
 from lanrocli.train.clock import PhaseClock
 from lanrocli.train.collect import Collector
@@ -188,9 +187,13 @@ class Trainer:
         obs_dim = observation_size(settings.slots)
         action_dim = action_size(task_class(settings.task).gripper)
         layout = ObjectLayout(ARM_SIZE, OBJECT_SIZE, settings.slots)
-        self.agent = SACAgent(obs_dim, action_dim, len(self.vocabulary), agent_settings, settings.seed, self.device, layout)
+        self.agent = SACAgent(
+            obs_dim, action_dim, len(self.vocabulary), agent_settings, settings.seed, self.device, layout
+        )
         self.buffer = ReplayBuffer(
-            settings.buffer.size, obs_dim, action_dim,
+            settings.buffer.size,
+            obs_dim,
+            action_dim,
             max_objects=settings.slots,
             vocabulary=self.vocabulary,
             negations=settings.env.negations or settings.buffer.relabel_negations,
@@ -216,13 +219,21 @@ class Trainer:
             LanroEnv, s.task, env, object_slots=s.slots, vocabulary=self.vocabulary, holdout=s.holdout
         )
 
-    def enter_stage(self, env: EnvSettings, stage: int, eval_episodes: int, eval_rate: float | None, buffer: BufferSettings) -> None:
+    def enter_stage(
+        self, env: EnvSettings, stage: int, eval_episodes: int, eval_rate: float | None, buffer: BufferSettings
+    ) -> None:
         """Collect, sample and evaluate with new settings from now on. The old stage's unfinished episodes are
         dropped: they were collected under a goal distribution that no longer holds, and half an episode gives
         relabelling no future to look at."""
         self.close()
         self._restore = None
-        changes = {"env": env, "stage": stage, "eval_episodes": eval_episodes, "eval_correction_rate": eval_rate, "buffer": buffer}
+        changes = {
+            "env": env,
+            "stage": stage,
+            "eval_episodes": eval_episodes,
+            "eval_correction_rate": eval_rate,
+            "buffer": buffer,
+        }
         self.settings = dataclasses.replace(self.settings, **changes)
         self.buffer.negations = env.negations or self.settings.buffer.relabel_negations
 

@@ -63,7 +63,7 @@ class RunLock:
             out.mkdir(parents=True, exist_ok=True)
             with tempfile.TemporaryFile(dir=out):
                 pass
-            self._file = open(out / LOCK, "a+")
+            self._file = open(out / LOCK, "a+")  # noqa: SIM115 - held open: the lock lasts as long as the file
         except OSError as error:
             raise RunError(
                 f"cannot write in the run folder {out}: {error.strerror or error}. Make it writable, or copy the "

@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.buffer.transitions import Batch
-
+from lanrocli.agent.sac import SACAgent
 from tests.agent.episodes import OBS_DIM
 from tests.agent.test_sac import _agent, _batch, _grounding_batch
 
@@ -18,7 +17,10 @@ def _gradients(agent: SACAgent, batch: Batch) -> tuple[dict[str, float], list[to
     """The metrics of one update and the gradients it leaves, the optimiser's step held back."""
     agent.optimizer.step = lambda: None  # type: ignore[method-assign,assignment,return-value]
     metrics = agent.update(batch)
-    grads = [p.grad if p.grad is not None else torch.zeros_like(p) for p in (*agent.actor.parameters(), *agent.critic.parameters())]
+    grads = [
+        p.grad if p.grad is not None else torch.zeros_like(p)
+        for p in (*agent.actor.parameters(), *agent.critic.parameters())
+    ]
     return metrics, [*grads, agent.log_alpha.grad]
 
 

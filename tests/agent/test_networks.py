@@ -73,7 +73,11 @@ def test_two_critics_differ_and_each_reads_obs_language_and_action() -> None:
     obs, language, action = torch.randn(10, 6), torch.randn(10, 32), torch.rand(10, 3)
     q = critic(obs, language, action)
     assert q.shape == (2, 10) and not torch.allclose(q[0], q[1])
-    for changed in (critic(obs + 1, language, action), critic(obs, language + 1, action), critic(obs, language, -action)):
+    for changed in (
+        critic(obs + 1, language, action),
+        critic(obs, language + 1, action),
+        critic(obs, language, -action),
+    ):
         assert not torch.allclose(changed, q)
 
 

@@ -14,7 +14,6 @@ from lanrocli.agent.networks import ObjectLayout
 from lanrocli.agent.normalizer import RunningNormalizer
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import SACSettings
-
 from tests.agent.episodes import ACTION_DIM, OBS_DIM, VOCAB
 
 LAYOUT = ObjectLayout(arm=3, object=4, slots=3)
@@ -112,7 +111,9 @@ def test_adding_an_object_leaves_the_arm_and_the_other_objects_as_they_were() ->
     assert torch.equal(before[:, : -LAYOUT.object], after[:, : -LAYOUT.object])
     assert (after[:, -LAYOUT.object :] != 0).all()
     # And the added object reads as it would in the first slot.
-    assert torch.equal(after[:, -LAYOUT.object :], norm(_permute(three, [2, 0, 1]))[:, LAYOUT.arm : LAYOUT.arm + LAYOUT.object])
+    assert torch.equal(
+        after[:, -LAYOUT.object :], norm(_permute(three, [2, 0, 1]))[:, LAYOUT.arm : LAYOUT.arm + LAYOUT.object]
+    )
 
 
 def test_empty_slots_normalise_to_zero() -> None:

@@ -17,8 +17,8 @@ from lanrocli.agent.networks import ObjectLayout
 from lanrocli.agent.sac import SACAgent
 from lanrocli.agent.settings import BufferSettings, SACSettings
 from lanrocli.core.choices import ActingAttention
-
 from tests.agent.episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
+
 
 def observed(agent: SACAgent, raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
     """Normalised observations and, for an object-wise agent, which slots hold objects, as the agent reads them."""
@@ -169,7 +169,9 @@ def test_without_the_sentence_in_the_trunk_it_acts_through_the_attention_alone()
     assert np.array_equal(red, blue)
     with_trunk = _agent(architecture="objects")
     red = with_trunk.act({"observation": obs, "instruction": np.stack([RED, RED])}, deterministic=True)
-    assert not np.allclose(red, with_trunk.act({"observation": obs, "instruction": np.stack([BLUE, BLUE])}, deterministic=True))
+    assert not np.allclose(
+        red, with_trunk.act({"observation": obs, "instruction": np.stack([BLUE, BLUE])}, deterministic=True)
+    )
     with pytest.raises(ValueError, match="sentence_in_trunk"):
         SACSettings(architecture="flat", sentence_in_trunk=False)
 
@@ -184,8 +186,13 @@ def test_grounding_loss_is_zero_without_readers_weight_or_relabelled_rows() -> N
 
 @pytest.mark.parametrize(
     ("architecture", "depth", "grounding", "trunk"),
-    [("flat", 1, 0.0, True), ("objects", 1, 1.0, True), ("flat", 0, 0.0, True), ("objects", 2, 0.5, True),
-     ("objects", 1, 1.0, False)],
+    [
+        ("flat", 1, 0.0, True),
+        ("objects", 1, 1.0, True),
+        ("flat", 0, 0.0, True),
+        ("objects", 2, 0.5, True),
+        ("objects", 1, 1.0, False),
+    ],
 )
 def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
     architecture: str, depth: int, grounding: float, trunk: bool
@@ -234,7 +241,10 @@ def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
         critic_grounding = F.cross_entropy(critic_scores.flatten(0, 1), named.repeat(critic_scores.shape[0]))
         actor_grounding = F.cross_entropy(actor_scores[0], named)
 
-    losses = ((r.critic, critic_loss + grounding * critic_grounding), (r.actor, actor_loss + grounding * actor_grounding))
+    losses = (
+        (r.critic, critic_loss + grounding * critic_grounding),
+        (r.actor, actor_loss + grounding * actor_grounding),
+    )
     for network, loss in losses:
         mine = dict(agent.critic.named_parameters() if network is r.critic else agent.actor.named_parameters())
         expected = torch.autograd.grad(loss, list(network.parameters()), retain_graph=True, allow_unused=True)
@@ -276,7 +286,8 @@ def test_building_and_training_leave_torch_global_generator_alone() -> None:
 
 
 @pytest.mark.parametrize(
-    ("architecture", "compile"), [("flat", False), ("objects", False), pytest.param("objects", True, marks=pytest.mark.slow)]
+    ("architecture", "compile"),
+    [("flat", False), ("objects", False), pytest.param("objects", True, marks=pytest.mark.slow)],
 )
 def test_state_survives_weights_only_load_and_resumes_bit_identically(
     architecture: str, compile: bool, caplog: pytest.LogCaptureFixture
@@ -333,23 +344,6 @@ def test_a_state_from_another_device_type_loads_with_a_derived_noise_stream(capl
     batch = _batch(rng)
     metrics = first.update(batch)
     assert metrics == second.update(batch) and all(np.isfinite(v) for v in metrics.values())
-
-
-def test_states_that_do_not_record_their_device_type_are_judged_by_their_generator(
-    caplog: pytest.LogCaptureFixture,
-) -> None:
-    agent = _agent()
-    agent.update(_batch(np.random.default_rng(0)))
-    state = agent.state_dict()
-    del state["generator_device"], state["seed"]
-    with caplog.at_level(logging.WARNING, logger="lanrocli.agent.noise"):
-        same = SACAgent.from_state_dict(_round_trip(state))
-        assert not caplog.records
-        state["generator"] = torch.zeros(16, dtype=torch.uint8)
-        moved = SACAgent.from_state_dict(_round_trip(state))
-    assert torch.equal(same.generator.get_state(), agent.generator.get_state())
-    assert len(caplog.records) == 1 and moved.updates == 1
-    assert np.isfinite(moved.update(_batch(np.random.default_rng(1)))["critic_loss"])
 
 
 def test_loading_needs_the_same_architecture_but_keeps_the_learning_settings() -> None:

@@ -97,7 +97,18 @@ def test_shell_completion_completes_commands_and_options() -> None:
 
 
 def test_sample_json_is_reproducible_and_well_formed() -> None:
-    args = ["sample-instructions", "--task", "push", "--n", "25", "--seed", "4", "--corrections", "--negations", "--json"]
+    args = [
+        "sample-instructions",
+        "--task",
+        "push",
+        "--n",
+        "25",
+        "--seed",
+        "4",
+        "--corrections",
+        "--negations",
+        "--json",
+    ]
     first = runner.invoke(app, args)
     second = runner.invoke(app, args)
     assert first.exit_code == 0 and first.output == second.output
@@ -163,7 +174,16 @@ def test_eval_json_is_clean_on_the_real_stdout() -> None:
     import sys
 
     out = subprocess.run(
-        [sys.executable, "-c", "from lanrocli.cli.app import app; app()", "eval", "oracle", "--episodes", "2", "--json"],
+        [
+            sys.executable,
+            "-c",
+            "from lanrocli.cli.app import app; app()",
+            "eval",
+            "oracle",
+            "--episodes",
+            "2",
+            "--json",
+        ],
         capture_output=True,
         text=True,
         check=True,
@@ -215,7 +235,10 @@ def test_quick_training_run_then_eval_plot_and_refusals(tmp_path) -> None:
     assert set(tested) == {"last", "best", "language", "correction_test"}
     assert set(tested["language"]) == {"true", "blank", "other"} and set(tested["correction_test"]) == {"last", "best"}
     blank = tested["language"]["blank"]
-    assert blank["named_first"]["episodes"] == blank["episodes"] and "| instruction | success | named object first |" in report_text
+    assert (
+        blank["named_first"]["episodes"] == blank["episodes"]
+        and "| instruction | success | named object first |" in report_text
+    )
     assert "## Correction test" in report_text
     corrections = runner.invoke(app, ["eval", str(out), "--correction-test", "--json"])
     assert corrections.exit_code == 0, corrections.output
@@ -327,7 +350,9 @@ def test_check_reports_every_problem_with_its_place_and_exits_2(tmp_path) -> Non
     result = runner.invoke(app, ["check", str(path)])
     assert result.exit_code == 2
     assert "3 problems" in result.output
-    assert f"{path}:5: stages[0].env.corection_rate" in result.output and "did you mean 'correction_rate'" in result.output
+    assert (
+        f"{path}:5: stages[0].env.corection_rate" in result.output and "did you mean 'correction_rate'" in result.output
+    )
     assert f"{path}:8: stages[1].env.correction_rate" in result.output
     assert f"{path}:9: stages[1].budget.steps" in result.output
     missing = runner.invoke(app, ["train"])
@@ -349,7 +374,9 @@ def untrained_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from lanrocli.agent.settings import BufferSettings, SACSettings
     from lanrocli.train.trainer import Trainer, TrainSettings
 
-    trainer = Trainer(TrainSettings(task="reach", buffer=BufferSettings(size=10)), SACSettings(hidden_size=16, obs_size=16))
+    trainer = Trainer(
+        TrainSettings(task="reach", buffer=BufferSettings(size=10)), SACSettings(hidden_size=16, obs_size=16)
+    )
     return trainer.save(tmp_path_factory.mktemp("run") / "checkpoint", resumable=False)
 
 
@@ -398,7 +425,9 @@ def test_eval_table_has_every_form_and_marks_what_is_not_judged() -> None:
     assert result.exit_code == 0, result.output
     for form in ("after an excuse", "after a negation", "after an edit"):
         assert f"correction spoken, {form}" in result.output
-    assert "wrong_object, correction spoken *" in result.output and "* fewer than 30 spoken corrections" in result.output
+    assert (
+        "wrong_object, correction spoken *" in result.output and "* fewer than 30 spoken corrections" in result.output
+    )
 
 
 def test_eval_correction_test_of_a_checkpoint_and_its_refusals(untrained_checkpoint: Path) -> None:

@@ -11,10 +11,10 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from lanrocli.cli.app import app
+from lanrocli.cli.play_session import PlayError, check_display
 from lanrocli.envs.caption import BAND
 from lanrocli.language import ObjectProps, grammar_vocabulary
 from lanrocli.language.typed import Grammar, Utterance, unknown_words, words_of
-from lanrocli.cli.play_session import PlayError, check_display
 
 runner = CliRunner()
 
@@ -27,7 +27,9 @@ def checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from lanrocli.agent.settings import BufferSettings, SACSettings
     from lanrocli.train.trainer import Trainer, TrainSettings
 
-    trainer = Trainer(TrainSettings(task="push", buffer=BufferSettings(size=10)), SACSettings(hidden_size=16, obs_size=16))
+    trainer = Trainer(
+        TrainSettings(task="push", buffer=BufferSettings(size=10)), SACSettings(hidden_size=16, obs_size=16)
+    )
     return trainer.save(tmp_path_factory.mktemp("run") / "checkpoint", resumable=False)
 
 
@@ -57,7 +59,14 @@ def test_instruction_and_correction_play_an_episode_that_changes_goal_and_writes
     result = play(
         checkpoint,
         "push the red cube\n\nsorry the blue cube\n",
-        "--seed", str(red_and_blue_seed), "--steps-per-line", "2", "--max-episode-steps", "6", "--gif", str(out),
+        "--seed",
+        str(red_and_blue_seed),
+        "--steps-per-line",
+        "2",
+        "--max-episode-steps",
+        "6",
+        "--gif",
+        str(out),
     )
     assert result.exit_code == 0, result.output
     output = result.output
@@ -102,7 +111,9 @@ def test_sentence_outside_the_grammar_is_flagged_and_played(checkpoint: Path, re
 
 
 def test_episodes_follow_until_the_input_ends_and_left_over_empty_lines_are_skipped(checkpoint: Path) -> None:
-    result = play(checkpoint, "push the cube\n\n\n\n\nmove the cube\n\n", "--max-episode-steps", "2", "--steps-per-line", "5")
+    result = play(
+        checkpoint, "push the cube\n\n\n\n\nmove the cube\n\n", "--max-episode-steps", "2", "--steps-per-line", "5"
+    )
     assert result.exit_code == 0, result.output
     assert "episode 2: no success in 2 steps" in result.output and "2 episodes, 0 successes" in result.output
     assert "episode 3" not in result.output, "no scene is drawn once the input has ended"
@@ -114,7 +125,14 @@ def test_episodes_option_stops_play(checkpoint: Path) -> None:
 
 
 def test_correction_too_long_to_read_is_not_given(checkpoint: Path) -> None:
-    result = play(checkpoint, "push the cube\nno i meant the red cube after all\n", "--max-episode-steps", "2", "--steps-per-line", "1")
+    result = play(
+        checkpoint,
+        "push the cube\nno i meant the red cube after all\n",
+        "--max-episode-steps",
+        "2",
+        "--steps-per-line",
+        "1",
+    )
     assert result.exit_code == 0, result.output
     assert "correction not given" in result.output and "correction at step" not in result.output
 
@@ -173,11 +191,15 @@ def test_grammar_knows_the_tasks_sentences() -> None:
     assert Utterance(words_of("push the red cube")) in push
     assert Utterance(words_of("shift the azure brick"), words_of("not the red cube")) in push
     assert Utterance(words_of("reach the red cube")) not in push
-    assert Utterance(words_of("push the red cube"), words_of("sorry the azure cube")) not in push, "corrections use common words"
+    assert Utterance(words_of("push the red cube"), words_of("sorry the azure cube")) not in push, (
+        "corrections use common words"
+    )
     assert Utterance(words_of("push red cube")) not in push
 
 
-def fitting(instruction: str, correction: str | None = None, objects: tuple[ObjectProps, ...] = (RED, BLUE, GREEN)) -> list[ObjectProps]:
+def fitting(
+    instruction: str, correction: str | None = None, objects: tuple[ObjectProps, ...] = (RED, BLUE, GREEN)
+) -> list[ObjectProps]:
     said = Utterance(words_of(instruction), words_of(correction) if correction else None)
     return [objects[i] for i in said.fitting(objects)]
 
@@ -201,5 +223,8 @@ def test_a_chain_of_corrections_narrows_what_is_left_each_time() -> None:
     assert said.text == "push the cube object not the red cube not the blue cube" and said.length == 12
     yellow = ObjectProps("yellow", "cube")
     assert said.fitting((RED, BLUE, yellow)) == [2]
-    assert Utterance(words_of("push the cube object"), words_of("not the red cube")).fitting((RED, BLUE, yellow)) == [1, 2]
+    assert Utterance(words_of("push the cube object"), words_of("not the red cube")).fitting((RED, BLUE, yellow)) == [
+        1,
+        2,
+    ]
     assert said in Grammar.of("push")

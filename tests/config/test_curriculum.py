@@ -10,10 +10,6 @@ from pathlib import Path
 import pytest
 
 from lanrocli.agent.settings import BufferSettings, SACSettings
-from lanrocli.core.choices import Kind, Mode, Split
-from lanrocli.tasks import Task
-from lanrocli.envs.settings import EnvSettings
-from lanrocli.language import COLOURS, TASKS, ObjectProps
 from lanrocli.config.curriculum import (
     QUICK_TEST_EPISODES,
     Curriculum,
@@ -26,6 +22,10 @@ from lanrocli.config.curriculum import (
     packaged_curricula,
 )
 from lanrocli.config.sections import STAGE_BUFFER_KEYS, EnvConfig
+from lanrocli.core.choices import Kind, Mode, Split
+from lanrocli.envs.settings import EnvSettings
+from lanrocli.language import COLOURS, TASKS, ObjectProps
+from lanrocli.tasks import Task
 
 MINIMAL = """\
 name: demo
@@ -180,8 +180,10 @@ def test_evaluation_correction_share_is_a_probability_above_zero(tmp_path: Path)
 
 
 def test_a_stage_evaluation_replaces_the_curriculums_keys_it_gives_for_that_stage_alone(tmp_path: Path) -> None:
-    text = "eval: {every: 500, episodes: 40}\n" + MINIMAL + (
-        "  - name: second\n    budget: {steps: 1000}\n    eval: {episodes: 80, correction_rate: 1, every: null}\n"
+    text = (
+        "eval: {every: 500, episodes: 40}\n"
+        + MINIMAL
+        + ("  - name: second\n    budget: {steps: 1000}\n    eval: {episodes: 80, correction_rate: 1, every: null}\n")
     )
     curriculum = load_curriculum(write(tmp_path, "c.yaml", text))
     assert curriculum.evaluation(0) == curriculum.eval
@@ -190,12 +192,17 @@ def test_a_stage_evaluation_replaces_the_curriculums_keys_it_gives_for_that_stag
     assert load_curriculum(write(tmp_path, "d.yaml", curriculum.to_yaml())) == curriculum  # config.yaml round trip
     assert curriculum.quick().evaluation(1).episodes == 5
     problem = only_problem(write(tmp_path, "e.yaml", text.replace("correction_rate: 1", "correction_rate: 2")))
-    assert (problem.line, problem.path) == (9, "stages[1].eval.correction_rate") and "less than or equal" in problem.message
+    assert (problem.line, problem.path) == (
+        9,
+        "stages[1].eval.correction_rate",
+    ) and "less than or equal" in problem.message
 
 
 def test_a_stage_buffer_replaces_the_curriculums_sampling_keys_it_gives_for_that_stage_alone(tmp_path: Path) -> None:
-    text = "buffer: {relabel_ratio: 0.5, size: 5000}\n" + MINIMAL + (
-        "  - name: second\n    budget: {steps: 1000}\n    buffer: {fresh_targets: true, relabel_ratio: 0.8}\n"
+    text = (
+        "buffer: {relabel_ratio: 0.5, size: 5000}\n"
+        + MINIMAL
+        + ("  - name: second\n    budget: {steps: 1000}\n    buffer: {fresh_targets: true, relabel_ratio: 0.8}\n")
     )
     curriculum = load_curriculum(write(tmp_path, "c.yaml", text))
     assert curriculum.buffer_settings(0) == curriculum.buffer.settings()
@@ -353,7 +360,9 @@ stages:
 def test_extends_chain_of_two(tmp_path: Path) -> None:
     write(tmp_path, "base.yaml", BASE)
     write(tmp_path, "middle.yaml", "extends: base.yaml\neval: {episodes: 3}\nagent: {critics: 1}\n")
-    curriculum = load_curriculum(write(tmp_path, "top.yaml", "extends: middle.yaml\nseed: 7\nagent: {batch_size: 32}\n"))
+    curriculum = load_curriculum(
+        write(tmp_path, "top.yaml", "extends: middle.yaml\nseed: 7\nagent: {batch_size: 32}\n")
+    )
     assert (curriculum.seed, curriculum.eval.every, curriculum.eval.episodes) == (7, 2000, 3)
     assert (curriculum.agent.batch_size, curriculum.agent.critics) == (32, 1)
     assert [stage.name for stage in curriculum.stages] == ["a", "b"]
@@ -393,12 +402,15 @@ def test_extends_missing_file_names_it(tmp_path: Path) -> None:
 
 
 def test_to_yaml_round_trips(tmp_path: Path) -> None:
-    text = MINIMAL + """\
+    text = (
+        MINIMAL
+        + """\
     env: {objects: 3, correction_rate: 0.25, kinds: [wrong_object, ambiguity], max_episode_steps: 80}
     promote: {success: 0.6, on: corrected, patience: 3, statistic: lower_bound}
     on_budget: stop
 agent: {actor_lr: 3e-4, max_grad_norm: 1.0}
 """
+    )
     curriculum = load_curriculum(write(tmp_path, "c.yaml", text))
     again = load_curriculum(write(tmp_path, "plan.yaml", curriculum.to_yaml()))
     assert again == curriculum
@@ -433,11 +445,25 @@ def test_builtin_curriculum() -> None:
     curriculum = builtin_curriculum()
     assert curriculum == load_curriculum(Path(__file__).parents[2] / "curricula" / "quick.yaml")
     assert [stage.name for stage in curriculum.stages] == ["single", "corrections", "negations"]
-    assert (curriculum.name, curriculum.task, curriculum.max_objects, curriculum.total_steps) == ("push-quick", "push", 2, 7500)
-    assert (curriculum.eval.every, curriculum.eval.episodes, curriculum.learning_starts, curriculum.envs) == (1000, 20, 256, 2)
+    assert (curriculum.name, curriculum.task, curriculum.max_objects, curriculum.total_steps) == (
+        "push-quick",
+        "push",
+        2,
+        7500,
+    )
+    assert (curriculum.eval.every, curriculum.eval.episodes, curriculum.learning_starts, curriculum.envs) == (
+        1000,
+        20,
+        256,
+        2,
+    )
     assert curriculum.test.episodes == 100 and curriculum.agent.batch_size == 64
     single, corrections, negations = curriculum.stages
-    assert single.promote is not None and (single.promote.success, single.promote.on, single.promote.patience) == (0.8, "overall", 2)
+    assert single.promote is not None and (single.promote.success, single.promote.on, single.promote.patience) == (
+        0.8,
+        "overall",
+        2,
+    )
     assert corrections.promote is not None and (corrections.promote.success, corrections.promote.on) == (
         0.7,
         "corrected",
@@ -455,7 +481,9 @@ def test_packaged_curricula_are_the_package_data_the_repository_links_to() -> No
     assert (Path(__file__).parents[2] / "curricula").resolve() == shipped.resolve()
 
 
-def test_a_curriculum_is_found_by_its_file_or_by_its_packaged_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_curriculum_is_found_by_its_file_or_by_its_packaged_name(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.chdir(tmp_path)  # a directory with no curricula of its own
     packaged = packaged_curricula()
     assert find_curriculum("push") == find_curriculum("push.yaml") == packaged["push"]
@@ -481,7 +509,9 @@ def test_diff_curricula(tmp_path: Path) -> None:
 
 
 def test_curriculum_model_is_usable_without_a_file() -> None:
-    curriculum = Curriculum.model_validate({"name": "x", "task": "lift", "stages": [{"name": "s", "budget": {"steps": 1}}]})
+    curriculum = Curriculum.model_validate(
+        {"name": "x", "task": "lift", "stages": [{"name": "s", "budget": {"steps": 1}}]}
+    )
     assert curriculum.stages[0].env.objects == 2
 
 
@@ -507,7 +537,9 @@ def test_lanro_check_does_not_load_torch() -> None:
     result = subprocess.run([*command, "check", str(path)], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert "environment steps in all" in result.stdout
-    imported = {line.rsplit("|", 1)[-1].strip() for line in result.stderr.splitlines() if line.startswith("import time:")}
+    imported = {
+        line.rsplit("|", 1)[-1].strip() for line in result.stderr.splitlines() if line.startswith("import time:")
+    }
     assert "lanrocli.config.curriculum" in imported and not imported & {"torch", "pybullet"}
 
 

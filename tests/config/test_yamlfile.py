@@ -136,7 +136,10 @@ def test_a_document_that_is_not_a_mapping_is_refused() -> None:
 BAD_FILES = {
     "alias-bomb": (ALIAS_BOMB, ":5: more than"),
     "ten-megabytes": ("name: big\n" + "# padding, as a curriculum would never have\n" * 240_000, ": larger than"),
-    "repeated-key": ("name: demo\nseed: 1\ntask: push\nstages: []\nseed: 2\n", ":5: seed: set again here, after line 2"),
+    "repeated-key": (
+        "name: demo\nseed: 1\ntask: push\nstages: []\nseed: 2\n",
+        ":5: seed: set again here, after line 2",
+    ),
     "repeated-nested-key": (
         MINIMAL + "    env: {objects: 2,\n          objects: 3}\n",
         ":7: stages[0].env.objects: set again here, after line 6",

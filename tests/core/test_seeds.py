@@ -13,17 +13,23 @@ field = st.integers(0, FIELD - 1)
 
 
 @given(run_seed=field, stage=st.integers(0, 20), block=field, index=st.integers(0, 100_000))
-def test_evaluation_and_test_seeds_lie_above_every_training_seed(run_seed: int, stage: int, block: int, index: int) -> None:
+def test_evaluation_and_test_seeds_lie_above_every_training_seed(
+    run_seed: int, stage: int, block: int, index: int
+) -> None:
     training = TrainSettings(seed=run_seed, stage=stage, envs=64).env_seed + 63
     assert training < FIELD + 64 < evaluation_seed(run_seed, stage, block) + index
     assert training < held_out_seed(run_seed, stage) + index
 
 
-@given(a=st.tuples(st.sampled_from(list(Purpose)), field, field, field, field),
-       b=st.tuples(st.sampled_from(list(Purpose)), field, field, field, field))
+@given(
+    a=st.tuples(st.sampled_from(list(Purpose)), field, field, field, field),
+    b=st.tuples(st.sampled_from(list(Purpose)), field, field, field, field),
+)
 def test_different_blocks_never_share_a_seed(a: tuple, b: tuple) -> None:
     (purpose_a, seed_a, stage_a, block_a, i), (purpose_b, seed_b, stage_b, block_b, j) = a, b
-    same_episode = first_seed(purpose_a, seed_a, stage_a, block_a) + i == first_seed(purpose_b, seed_b, stage_b, block_b) + j
+    same_episode = (
+        first_seed(purpose_a, seed_a, stage_a, block_a) + i == first_seed(purpose_b, seed_b, stage_b, block_b) + j
+    )
     assert same_episode == (a == b)
 
 

@@ -8,8 +8,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from lanrocli.envs.env import LanroEnv, observation_size
-from lanrocli.envs.registration import ENV_IDS
 from lanrocli.envs.policies import make_policy
+from lanrocli.envs.registration import ENV_IDS
 from lanrocli.language import RARE_WORD_COLOURS, SHAPE_WORDS, all_corrections, all_instructions, grammar_vocabulary
 from lanrocli.sim import WORKSPACE
 from lanrocli.sim.layout import FLOOR_HEIGHT
@@ -226,7 +226,7 @@ def test_object_slots_pad_the_observation_with_zeros() -> None:
     obs, _ = env.reset(seed=4)
     assert env.observation_space["observation"].shape == (observation_size(3),)
     assert obs["observation"].shape == (observation_size(3),)
-    assert np.all(obs["observation"][observation_size(2):] == 0.0)
+    assert np.all(obs["observation"][observation_size(2) :] == 0.0)
     plain = LanroEnv("reach", objects=2)
     np.testing.assert_array_equal(plain.reset(seed=4)[0]["observation"], obs["observation"][: observation_size(2)])
     env.close()

@@ -40,7 +40,9 @@ def fits(named: tuple[str | None, str | None], obj: ObjectProps) -> bool:
 
 def run_episode(seed: int, kind: Kind, negations: bool, delay: int, n_objects: int = 3, mode: Mode = Mode.COLOUR_SHAPE):
     rng = np.random.default_rng(seed)
-    settings = InstructorSettings(correction_rate=1.0, negations=negations, max_delay=delay, rare_words=True, kinds=(kind,))
+    settings = InstructorSettings(
+        correction_rate=1.0, negations=negations, max_delay=delay, rare_words=True, kinds=(kind,)
+    )
     instructor = Instructor("push", settings)
     objects, goal = sample_objects(
         rng, mode, n_objects, need_shared=kind is Kind.AMBIGUITY, need_same_shape=kind is Kind.COMMON_GROUND
@@ -222,7 +224,11 @@ def spoken_forms(rate: float | None, n_objects: int, mode: Mode, episodes: int =
         instructor = Instructor("push", settings)
         challenge = instructor.draw_challenge(rng)
         objects, goal = sample_objects(
-            rng, mode, n_objects, need_shared=challenge is Kind.AMBIGUITY, need_same_shape=challenge is Kind.COMMON_GROUND
+            rng,
+            mode,
+            n_objects,
+            need_shared=challenge is Kind.AMBIGUITY,
+            need_same_shape=challenge is Kind.COMMON_GROUND,
         )
         scene = Scene(objects, goal, np.zeros((n_objects, 2)))
         instructor.start(rng, scene, challenge)

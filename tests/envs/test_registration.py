@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import lanrocli
-from lanrocli.envs.settings import PLAIN_LIMIT
 from lanrocli.envs.registration import ENTRY_POINT, ENV_IDS, register_envs
+from lanrocli.envs.settings import PLAIN_LIMIT
 
 
 def run_python(code: str) -> subprocess.CompletedProcess[str]:

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from lanrocli.envs.env import LanroEnv
-from lanrocli.evaluation.evaluate import EvaluationReport, evaluate
 from lanrocli.envs.policies import make_policy
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.workers import EnvWorker, WorkerError, make_envs
+from lanrocli.evaluation.evaluate import EvaluationReport, evaluate
 
 SETTINGS = EnvSettings(objects=3, mode="colour_shape", correction_rate=1.0, negations=True, negation_rate=0.5)
 MAKE = functools.partial(LanroEnv, "push", SETTINGS)

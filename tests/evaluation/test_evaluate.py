@@ -12,10 +12,10 @@ from hypothesis import strategies as st
 
 from lanrocli.core.choices import CorrectionForm, Instruction, Kind
 from lanrocli.envs.env import LanroEnv
-from lanrocli.evaluation.evaluate import EvaluationReport, evaluate
-from lanrocli.evaluation.metrics import ATTENTION, FIGURES, METRIC_NAMES, PHASES, PLAIN, EpisodeResult
 from lanrocli.envs.policies import make_policy
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.evaluation.evaluate import EvaluationReport, evaluate
+from lanrocli.evaluation.metrics import ATTENTION, FIGURES, METRIC_NAMES, PHASES, PLAIN, EpisodeResult
 from lanrocli.language import TASK_VERBS, identifying_phrases, instruction
 
 NEGATION, EXCUSE, EDIT = CorrectionForm.NEGATION, CorrectionForm.EXCUSE, CorrectionForm.EDIT
@@ -53,7 +53,11 @@ def test_corrected_success_counts_only_episodes_with_a_spoken_correction() -> No
     assert record["corrected"]["episodes"] == 2 and record["corrected"]["success"] == 0.5
     assert record["by_kind"]["wrong_object"]["corrected"]["episodes"] == 1
     assert record["correction_episode_success"] == 0.5
-    assert record["by_form"]["negation"] == {"episodes": 1, "success": 1.0, "ci": list(report.by_form()["negation"].interval)}
+    assert record["by_form"]["negation"] == {
+        "episodes": 1,
+        "success": 1.0,
+        "ci": list(report.by_form()["negation"].interval),
+    }
     assert record["by_form"]["edit"]["episodes"] == 0 and record[ATTENTION] is None
     # The registry reads each figure back from the record as the metrics have it.
     assert all(figure.read(record) == (metrics[figure.count], metrics[figure.name]) for figure in FIGURES)
@@ -67,9 +71,7 @@ def test_every_form_has_its_columns_and_older_records_keep_their_negations() -> 
     assert negation.read(older) == (4, 0.25)
 
 
-results = st.builds(
-    episode, st.booleans(), st.sampled_from([None, *Kind]), st.sampled_from([None, *CorrectionForm])
-)
+results = st.builds(episode, st.booleans(), st.sampled_from([None, *Kind]), st.sampled_from([None, *CorrectionForm]))
 
 
 @given(st.lists(results, max_size=30))
@@ -150,8 +152,9 @@ def test_enough_stops_at_the_first_episode_at_which_it_holds() -> None:
         full = evaluate(env, make_policy("mistaken", "reach"), 10, seed=7)
         heard = [sum(r.negation for r in full.results[: i + 1]) for i in range(10)]
         assert heard[-1] >= 2
-        stopped = evaluate(env, make_policy("mistaken", "reach"), 10, seed=7,
-                           enough=lambda r: r.by_form()["negation"].episodes >= 2)
+        stopped = evaluate(
+            env, make_policy("mistaken", "reach"), 10, seed=7, enough=lambda r: r.by_form()["negation"].episodes >= 2
+        )
     finally:
         env.close()
     assert len(stopped.results) == heard.index(2) + 1
@@ -203,7 +206,8 @@ def test_other_names_another_object_and_is_judged_on_it(env: LanroEnv) -> None:
         goal = info["goal_index"]
         text = env.vocabulary.decode(reader.shown[sum(r.length for r in report.results[:i])])
         named = {
-            k for k, obj in enumerate(objects)
+            k
+            for k, obj in enumerate(objects)
             for phrase in identifying_phrases(obj, objects[:k] + objects[k + 1 :])
             for verb in TASK_VERBS["reach"]
             if instruction(verb, phrase) == text

@@ -34,7 +34,7 @@ def test_the_quota_waits_for_second_corrections_only_where_a_stage_speaks_them()
 
 def test_the_quota_is_sized_like_the_test() -> None:
     assert CORRECTION_QUOTA.scaled(QUOTA_TEST_EPISODES) == CORRECTION_QUOTA
-    assert CORRECTION_QUOTA == CorrectionQuota(spoken=300, negations=150, episodes=3000, second=0)
+    assert CorrectionQuota(spoken=300, negations=150, episodes=3000, second=0) == CORRECTION_QUOTA
     assert CORRECTION_QUOTA.scaled(100) == CorrectionQuota(60, 30, 600)
     assert CORRECTION_QUOTA.scaled(2) == CorrectionQuota(2, 1, 12)  # never below one, unless none is asked for
     assert CorrectionQuota(300, 150, 3000, second=30).scaled(100) == CorrectionQuota(60, 30, 600, 6)

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from lanrocli.envs.env import LanroEnv
-from lanrocli.evaluation.evaluate import EvaluationReport, evaluate
 from lanrocli.envs.policies import make_policy
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.evaluation.evaluate import EvaluationReport, evaluate
 
 SETTINGS = EnvSettings(objects=3, mode="colour_shape", correction_rate=1.0, negations=True, negation_rate=0.5)
 

@@ -34,7 +34,7 @@ PAIRS = next(f for f in SPLIT_FIGURES if f.split is Split.PAIRS and f.name == "c
 
 
 def test_only_splits_that_change_the_correction_alone_have_a_control() -> None:
-    assert CONTROLLED == {Split.CORRECTION_WORDS, Split.LATE_CORRECTIONS}
+    assert {Split.CORRECTION_WORDS, Split.LATE_CORRECTIONS} == CONTROLLED
 
 
 def test_the_drop_of_a_controlled_split_is_taken_from_its_control() -> None:
@@ -75,9 +75,7 @@ def test_lanro_eval_split_says_the_drop_from_the_control() -> None:
 def results(outcomes: list[bool | None]) -> list[EpisodeResult]:
     """Episodes by outcome where a correction was spoken, None where none was."""
     form = CorrectionForm.EXCUSE
-    return [
-        EpisodeResult(bool(won), 50, Kind.AMBIGUITY, None if won is None else form, -10.0) for won in outcomes
-    ]
+    return [EpisodeResult(bool(won), 50, Kind.AMBIGUITY, None if won is None else form, -10.0) for won in outcomes]
 
 
 def test_a_paired_drop_counts_each_way_on_its_own_corrected_episodes() -> None:

@@ -13,9 +13,9 @@ from stable_baselines3.common.preprocessing import preprocess_obs
 
 import lanrocli  # noqa: F401  (registers the ids)
 from lanrocli.envs.env import observation_size
-from lanrocli.language import PAD_ID, Vocabulary
 from lanrocli.integrations.sb3 import LanguageExtractor
 from lanrocli.integrations.wrappers import MultiDiscreteInstruction
+from lanrocli.language import PAD_ID, Vocabulary
 
 
 @pytest.fixture(scope="module")

@@ -12,9 +12,9 @@ from gymnasium.utils.env_checker import check_env
 
 import lanrocli  # noqa: F401  (registers the ids)
 from lanrocli.envs.env import LanroEnv, observation_size
+from lanrocli.integrations.wrappers import MultiDiscreteInstruction
 from lanrocli.language import grammar_vocabulary
 from lanrocli.language.vocabulary import agent_vocabulary
-from lanrocli.integrations.wrappers import MultiDiscreteInstruction
 
 
 def test_the_instruction_becomes_one_category_per_word_of_the_vocabulary() -> None:

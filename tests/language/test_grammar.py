@@ -61,7 +61,9 @@ def test_extended_instructions_are_instruction_then_correction() -> None:
     sentences = list(all_sentences("push", corrections=True, negations=True, rare=True))
     instructions = {t for t, _ in all_instructions("push", rare=True)}
     corrections = {t for t, _ in all_corrections(negations=True)}
-    assert len(sentences) == len(instructions) * len(corrections) == 837 * 594  # 3 verbs x (27 colour words x 9 shape words + 9 + 27)
+    assert (
+        len(sentences) == len(instructions) * len(corrections) == 837 * 594
+    )  # 3 verbs x (27 colour words x 9 shape words + 9 + 27)
     sample = sentences[:: len(sentences) // 997]
     for s in sample:
         assert s.instruction in instructions and s.correction in corrections
@@ -123,7 +125,11 @@ def test_uniqueness_helper_never_calls_an_ambiguous_phrase_unique(table: list[Ob
 
 
 def test_uniqueness_on_a_hand_built_table() -> None:
-    green_cube, green_cuboid, red_cube = ObjectProps("green", "cube"), ObjectProps("green", "cuboid"), ObjectProps("red", "cube")
+    green_cube, green_cuboid, red_cube = (
+        ObjectProps("green", "cube"),
+        ObjectProps("green", "cuboid"),
+        ObjectProps("red", "cube"),
+    )
     unique = {p.words for p in identifying_phrases(green_cube, [green_cuboid, red_cube])}
     assert unique == {"green cube", "green box", "green block"}
     ambiguous = {p.words for p in ambiguous_phrases(green_cube, [green_cuboid, red_cube])}

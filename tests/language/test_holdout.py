@@ -34,9 +34,7 @@ COLOUR_OF = {c: c for c in COLOURS} | RARE_WORD_COLOURS
 def named_pairs(text: str) -> set[tuple[str, str]]:
     """Every colour-shape pair a sentence names by two adjacent words, read independently of the grammar."""
     words = text.split()
-    return {
-        (COLOUR_OF[a], SHAPE_OF[b]) for a, b in itertools.pairwise(words) if a in COLOUR_OF and b in SHAPE_OF
-    }
+    return {(COLOUR_OF[a], SHAPE_OF[b]) for a, b in itertools.pairwise(words) if a in COLOUR_OF and b in SHAPE_OF}
 
 
 def episode(seed: int, split: Split | None, settings: InstructorSettings = SETTINGS) -> tuple[Instructor, Scene]:
@@ -180,8 +178,15 @@ def split_at_correction(text: str) -> tuple[str, str]:
 @pytest.mark.parametrize("split", list(Split))
 def test_the_environment_draws_a_splits_episodes(split: Split) -> None:
     env = LanroEnv(
-        "push", objects=3, mode="colour_shape", correction_rate=1.0, negations=True, rare_words=True,
-        kinds=["common_ground"] if split is Split.COMMON_GROUND else None, holdout=HOLDOUT, split=split,
+        "push",
+        objects=3,
+        mode="colour_shape",
+        correction_rate=1.0,
+        negations=True,
+        rare_words=True,
+        kinds=["common_ground"] if split is Split.COMMON_GROUND else None,
+        holdout=HOLDOUT,
+        split=split,
     )
     try:
         for seed in range(10):

@@ -9,12 +9,11 @@ import pytest
 from typer.testing import CliRunner
 
 from lanrocli.cli.app import app
-from lanrocli.train.checkpoint import resolve_checkpoint
 from lanrocli.pretrained import agent_path, export_agent, packaged_agents, provenance
+from lanrocli.train.checkpoint import resolve_checkpoint
 from lanrocli.train.errors import CheckpointError
 from lanrocli.train.runfolder import CORRECTION_TEST, SPLITS, read_pointer, step_checkpoint
 from lanrocli.train.testset import measure
-
 from tests.train.runs import Baseline
 
 runner = CliRunner()
@@ -46,7 +45,9 @@ def test_export_refuses_a_used_folder_and_an_untested_agent(straight: Baseline, 
     assert result.exit_code == 2 and "holds no test of" in result.output
 
 
-def test_a_name_finds_the_shipped_agent_and_an_unknown_one_is_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_name_finds_the_shipped_agent_and_an_unknown_one_is_named(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.chdir(tmp_path)
     for name, folder in packaged_agents().items():
         assert agent_path(Path(name)) == folder

@@ -13,11 +13,11 @@ import yaml
 from typer.testing import CliRunner
 
 from lanrocli.cli.app import app
-from lanrocli.report.groups import group_runs
-from lanrocli.sweep.plan import SWEEP_FILE, SweepSpec
-from lanrocli.report.aggregate import ReportError, make_report
-from lanrocli.report.output import to_json, to_markdown
 from lanrocli.config.curriculum import load_curriculum
+from lanrocli.report.aggregate import ReportError, make_report
+from lanrocli.report.groups import group_runs
+from lanrocli.report.output import to_json, to_markdown
+from lanrocli.sweep.plan import SWEEP_FILE, SweepSpec
 from lanrocli.train.runfolder import CONFIG, LATEST, REPORT, TEST
 from tests.train.runs import tiny
 
@@ -30,8 +30,12 @@ def rate(episodes: int, success: float | None) -> dict:
 
 def record(success: float, corrected: float | None) -> dict:
     return {
-        "episodes": 100, "success": success, "success_ci": [0.0, 1.0], "correction_episodes": 50,
-        "correction_episode_success": success, "corrected": rate(20 if corrected is not None else 0, corrected),
+        "episodes": 100,
+        "success": success,
+        "success_ci": [0.0, 1.0],
+        "correction_episodes": 50,
+        "correction_episode_success": success,
+        "corrected": rate(20 if corrected is not None else 0, corrected),
         "by_kind": {"ambiguity": {**rate(10, 0.5), "corrected": rate(5 if corrected is not None else 0, corrected)}},
         "by_negation": {"with_negation": rate(0, None), "without_negation": rate(0, None)},
     }
@@ -49,8 +53,15 @@ def make_run(folder: Path, seed: int, stages: list[tuple[int, bool, float, float
         stage = folder / f"stage-{index + 1}-{name}"
         (stage / "step-1").mkdir(parents=True)
         (stage / TEST).write_text(json.dumps({"last": record(success, corrected), "best": record(1.0, 1.0)}))
-        results.append({"index": index, "name": name, "start": start, "end": start + steps,
-                        "ended": "promoted" if promoted else "budget"})
+        results.append(
+            {
+                "index": index,
+                "name": name,
+                "start": start,
+                "end": start + steps,
+                "ended": "promoted" if promoted else "budget",
+            }
+        )
         start += steps
     (stage / "step-1" / "state.json").write_text(json.dumps({"extra": {"run": {"results": results}}}))
     (folder / LATEST).write_text(f"{stage.name}/step-1\n")
@@ -88,8 +99,10 @@ def add_correction_test(run: Path, negation: float, negations: int) -> None:
     """The last stage's correction test, as the run's final test writes it, with ``negations`` spoken negations."""
     test = next(run.glob("stage-*")) / TEST
     tested = json.loads(test.read_text())
-    spoken = {**record(0.9, 0.6), "by_form": {"excuse": rate(300, 0.7), "negation": rate(negations, negation),
-                                              "edit": rate(0, None)}}
+    spoken = {
+        **record(0.9, 0.6),
+        "by_form": {"excuse": rate(300, 0.7), "negation": rate(negations, negation), "edit": rate(0, None)},
+    }
     tested["correction_test"] = {"last": spoken, "best": spoken}
     test.write_text(json.dumps(tested))
 
@@ -149,7 +162,10 @@ def test_a_setting_an_older_run_lacks_reads_as_its_default_and_names_do_not_spli
     changed = yaml.safe_load((runs[1] / CONFIG).read_text())
     changed["agent"]["share_encoder"] = True
     (runs[1] / CONFIG).write_text(yaml.safe_dump(changed))
-    assert [(g.label, len(g.runs)) for g in group_runs(runs)] == [("agent.share_encoder=false", 2), ("agent.share_encoder=true", 1)]
+    assert [(g.label, len(g.runs)) for g in group_runs(runs)] == [
+        ("agent.share_encoder=false", 2),
+        ("agent.share_encoder=true", 1),
+    ]
 
 
 def test_a_sweep_folder_stands_for_its_trials(tmp_path: Path) -> None:

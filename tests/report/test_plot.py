@@ -50,7 +50,11 @@ def test_a_run_folder_reads_as_its_curve(tmp_path: Path) -> None:
 
 DAMAGED = {
     "garbled line": ((HEADER, metrics_line(0, 100), "0,stage-1,20", metrics_line(0, 300)), 3, "3 values where"),
-    "not a number": ((HEADER, metrics_line(0, 100), metrics_line(0, 200, "half")), 3, "success is 'half', not a number"),
+    "not a number": (
+        (HEADER, metrics_line(0, 100), metrics_line(0, 200, "half")),
+        3,
+        "success is 'half', not a number",
+    ),
     "steps not whole": ((HEADER, metrics_line(0, 1.5)), 2, "env_steps is '1.5', not a whole number"),
     "missing header": ((metrics_line(0, 100), metrics_line(0, 200)), 1, "the header has no columns"),
 }
@@ -82,7 +86,12 @@ def test_groups_are_drawn_as_mean_and_bootstrap_band_with_median_boundaries(tmp_
     for name, boundary, success in (("a", 200, 0.2), ("b", 300, 0.4), ("c", 400, 0.9)):
         folder = tmp_path / name
         folder.mkdir()
-        lines = [HEADER, metrics_line(0, 100, success), metrics_line(0, boundary, success), metrics_line(1, 500, success)]
+        lines = [
+            HEADER,
+            metrics_line(0, 100, success),
+            metrics_line(0, boundary, success),
+            metrics_line(1, 500, success),
+        ]
         (folder / METRICS).write_text("".join(line + "\n" for line in lines))
         runs.append(folder)
     curves = [read_run(run) for run in runs]

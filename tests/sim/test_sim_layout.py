@@ -30,14 +30,9 @@ def test_single_substepped_call_matches_explicit_substeps() -> None:
     """The stepping scheme is only valid if scaled motor limits reproduce 20 plain steps."""
     single, explicit = World(), World()
     try:
-        explicit.client.setPhysicsEngineParameter(
-            fixedTimeStep=CONTROL_DT / SUBSTEPS, numSubSteps=0
-        )
+        explicit.client.setPhysicsEngineParameter(fixedTimeStep=CONTROL_DT / SUBSTEPS, numSubSteps=0)
         joints = list(range(7))
-        bodies = [
-            w.client.loadURDF(URDF, basePosition=[-0.5, 0, 0], useFixedBase=True)
-            for w in (single, explicit)
-        ]
+        bodies = [w.client.loadURDF(URDF, basePosition=[-0.5, 0, 0], useFixedBase=True) for w in (single, explicit)]
         targets = [0.3, 0.5, -0.2, -1.5, 0.1, 1.8, 0.4]
         weak = [5.0] * 7  # weak enough that the limits decide the motion
         single.client.setJointMotorControlArray(

@@ -62,9 +62,7 @@ def test_zero_action_holds_position(world: World, panda: Panda) -> None:
     np.testing.assert_allclose(panda.state().ee_position, before, atol=0.001)
 
 
-def test_end_effector_stays_in_workspace_under_random_actions(
-    world: World, gripper_panda: Panda
-) -> None:
+def test_end_effector_stays_in_workspace_under_random_actions(world: World, gripper_panda: Panda) -> None:
     rng = np.random.default_rng(0)
     for step in range(300):
         if step % 100 == 0:
@@ -78,9 +76,7 @@ def test_end_effector_stays_in_workspace_under_random_actions(
         assert WORKSPACE.contains(gripper_panda.state().ee_position, tolerance=0.05)
 
 
-def test_end_effector_reaches_workspace_corners(
-    world: World, panda: Panda, drive_to: Callable[..., int]
-) -> None:
+def test_end_effector_reaches_workspace_corners(world: World, panda: Panda, drive_to: Callable[..., int]) -> None:
     for corner in ([0.2, 0.2, 0.02], [0.2, -0.2, 0.19], [-0.2, 0.2, 0.19], [-0.2, -0.2, 0.02]):
         panda.reset()
         steps = drive_to(world, panda, corner, tolerance=0.005)

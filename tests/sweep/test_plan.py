@@ -9,9 +9,9 @@ import pytest
 from typer.testing import CliRunner
 
 from lanrocli.cli.app import app
-from lanrocli.sweep.plan import SWEEP_FILE, SweepError, SweepSpec, open_sweep, split_values
 from lanrocli.config.curriculum import CurriculumError, load_curriculum
 from lanrocli.config.overrides import SettingError
+from lanrocli.sweep.plan import SWEEP_FILE, SweepError, SweepSpec, open_sweep, split_values
 from tests.train.runs import tiny
 
 runner = CliRunner()
@@ -97,7 +97,19 @@ def test_several_values_after_one_option(tmp_path: Path) -> None:
     path = tiny(tmp_path)
     out = tmp_path / "sweep"
     # A bad value among several --set values after one option shows they were all read: nothing runs.
-    args = ["sweep", str(path), "--seeds", "0", "1", "2", "--set", "eval.episodes=3", "agent.critics=7", "--out", str(out)]
+    args = [
+        "sweep",
+        str(path),
+        "--seeds",
+        "0",
+        "1",
+        "2",
+        "--set",
+        "eval.episodes=3",
+        "agent.critics=7",
+        "--out",
+        str(out),
+    ]
     result = runner.invoke(app, args)
     assert result.exit_code == 2 and "--set agent.critics=7" in result.output, result.output
     assert "seed=2" not in result.output and not out.exists()

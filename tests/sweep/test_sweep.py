@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from lanrocli.sweep.plan import SWEEP_FILE
-from lanrocli.train.runfolder import REPORT
 from lanrocli.train.report import run_ended
+from lanrocli.train.runfolder import REPORT
 from lanrocli.train.writing import LOCK
 from tests.train.runs import Baseline, finish, lanro, outcome, rows, tiny, wait_until
 
@@ -40,7 +40,9 @@ def straight(tmp_path_factory: pytest.TempPathFactory) -> Baseline:
 def started(out: Path, process: subprocess.Popen[str]) -> None:
     """Wait until every trial has evaluated at least once."""
     wait_until(
-        lambda: all((out / t / "metrics.csv").is_file() and len(rows(out / t)) >= 1 for t in TRIALS), process, "evaluations"
+        lambda: all((out / t / "metrics.csv").is_file() and len(rows(out / t)) >= 1 for t in TRIALS),
+        process,
+        "evaluations",
     )
 
 

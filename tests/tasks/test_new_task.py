@@ -8,11 +8,10 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from lanrocli.tasks import Task
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.policies import make_policy
 from lanrocli.language import TASKS, UNK_ID, grammar_vocabulary
-from lanrocli.tasks import ArmView, OracleMemory, TaskDefinition, TaskView, registered
+from lanrocli.tasks import ArmView, OracleMemory, Task, TaskDefinition, TaskView, registered
 
 ABOVE = (0.03, 0.08)
 """How far (m) above an object's top the hand must be to hover over it."""

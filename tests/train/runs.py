@@ -11,8 +11,8 @@ import time
 from pathlib import Path
 from typing import NamedTuple
 
-from lanrocli.train.runstate import RunState
 from lanrocli.train.runfolder import LATEST, METRICS, read_pointer
+from lanrocli.train.runstate import RunState
 
 TINY = """\
 name: tiny
@@ -55,7 +55,11 @@ def lanro(args: list[str], cwd: Path) -> subprocess.Popen[str]:
     group as a terminal's Ctrl-C does."""
     return subprocess.Popen(
         [sys.executable, "-c", "from lanrocli.cli.app import app; app()", *args],
-        cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
+        cwd=cwd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
     )
 
 

@@ -6,13 +6,12 @@ from pathlib import Path
 
 import pytest
 
-from lanrocli.train.branch import branch, branch_point
 from lanrocli.config.curriculum import load_curriculum
+from lanrocli.train.branch import branch, branch_point
 from lanrocli.train.errors import RunError
 from lanrocli.train.pipeline import CurriculumRun
 from lanrocli.train.runfolder import CONFIG
 from lanrocli.train.writing import TMP_PREFIX
-
 from tests.train.runs import Baseline, finish, outcome, tiny, train
 
 THIRD = "negations: true, max_episode_steps: 20}\n    budget: {steps: 80}"
@@ -42,7 +41,11 @@ def source_folder(tmp_path: Path) -> Path:
     [
         ("agent: {batch_size: 16}", "agent: {batch_size: 32}", r"in its stages alone(.|\n)*\+  batch_size: 32"),
         ("  - name: first\n    env: {objects: 2,", "  - name: first\n    env: {objects: 3,", "in its first stage"),
-        ("mode: colour_shape, correction_rate", "mode: colour_shape, max_corrections: 2, correction_rate", "2 corrections"),
+        (
+            "mode: colour_shape, correction_rate",
+            "mode: colour_shape, max_corrections: 2, correction_rate",
+            "2 corrections",
+        ),
         ("  - name: third\n", "  - name: thirds\n", "stage 2 has no checkpoint"),  # a new stage, none trained
     ],
 )

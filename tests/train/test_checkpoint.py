@@ -131,8 +131,6 @@ def test_random_states_survive_json() -> None:
     assert state_from_json(json.loads(json.dumps(state_to_json(state)))) == state
 
 
-
-
 def test_a_checkpoint_without_its_manifest_is_refused(tmp_path: Path) -> None:
     directory = save_checkpoint(tmp_path / "step-1", contents())
     (directory / MANIFEST_FILE).unlink()

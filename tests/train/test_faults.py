@@ -21,18 +21,17 @@ import pytest
 from typer.testing import CliRunner
 
 from lanrocli.cli.app import app
+from lanrocli.config.curriculum import load_curriculum
 from lanrocli.evaluation.evaluate import SIDE_BY_SIDE
 from lanrocli.train import checkpoint
 from lanrocli.train import writing as runfolder
 from lanrocli.train.checkpoint import AGENT_FILE, BUFFER_FILE, STATE_FILE
-from lanrocli.config.curriculum import load_curriculum
 from lanrocli.train.errors import RunError
 from lanrocli.train.pipeline import CurriculumRun
 from lanrocli.train.runfolder import CONFIG, LATEST, METRICS, SET_ASIDE, read_pointer
 from lanrocli.train.writing import TMP_PREFIX, RunLock
-
-from tests.train.runs import Baseline, finish, lanro, outcome, rows, tiny, train, wait_for_rows, wait_until
 from tests.config.test_yamlfile import ALIAS_BOMB
+from tests.train.runs import Baseline, finish, lanro, outcome, rows, tiny, train, wait_for_rows, wait_until
 
 runner = CliRunner()
 
@@ -119,7 +118,10 @@ def test_a_second_writer_is_refused_naming_the_first_and_a_dead_one_leaves_no_lo
     lock.release()
     RunLock(out).release()
 
-    code = f"from pathlib import Path; from lanrocli.train.writing import RunLock; lock = RunLock(Path({str(out)!r})); print('held', flush=True); input()"
+    code = (
+        "from pathlib import Path; from lanrocli.train.writing import RunLock; "
+        f"lock = RunLock(Path({str(out)!r})); print('held', flush=True); input()"
+    )
     holder = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
     with pytest.raises(RunError, match=f"in use: process {holder.pid}"):

@@ -9,11 +9,10 @@ from pathlib import Path
 from typer.testing import CliRunner
 
 from lanrocli.cli.app import app
-from lanrocli.evaluation.metrics import FIGURES, METRIC_NAMES, Figure
 from lanrocli.config.curriculum import load_curriculum
+from lanrocli.evaluation.metrics import FIGURES, METRIC_NAMES, Figure
 from lanrocli.train.pipeline import CurriculumRun
 from lanrocli.train.runfolder import METRIC_COLUMNS
-
 from tests.train.runs import rows
 
 ONE_STAGE = """\

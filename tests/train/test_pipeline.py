@@ -12,16 +12,19 @@ import pytest
 from typer.testing import CliRunner
 
 from lanrocli.cli.app import app
+from lanrocli.config.curriculum import Curriculum, load_curriculum
 from lanrocli.core.choices import CorrectionForm, Split
+from lanrocli.core.seeds import correction_test_seed, evaluation_seed, held_out_seed, split_test_seed
+from lanrocli.envs.settings import EnvSettings
 from lanrocli.evaluation.evaluate import EvaluationReport
 from lanrocli.evaluation.metrics import EpisodeResult, wilson_interval
-from lanrocli.envs.settings import EnvSettings
-from lanrocli.train.checkpoint import AGENT_FILE, resolve_checkpoint
-from lanrocli.config.curriculum import Curriculum, load_curriculum
-from lanrocli.train.errors import RunError
+from lanrocli.evaluation.quota import CORRECTION_QUOTA
 from lanrocli.evaluation.splits import CONTROL, CONTROLLED, DROP
+from lanrocli.train.checkpoint import AGENT_FILE, resolve_checkpoint
+from lanrocli.train.errors import RunError
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
 from lanrocli.train.recovery import restore_files as _restore_files
+from lanrocli.train.report import render_report
 from lanrocli.train.runfolder import (
     CONFIG,
     CORRECTION_TEST,
@@ -34,14 +37,10 @@ from lanrocli.train.runfolder import (
     step_checkpoint,
     write_pointer,
 )
-from lanrocli.train.report import render_report
-from lanrocli.core.seeds import correction_test_seed, evaluation_seed, held_out_seed, split_test_seed
-from lanrocli.evaluation.quota import CORRECTION_QUOTA
 from lanrocli.train.testset import Measurement, correction_test, split_test
 from lanrocli.train.testset import once_per_agent as _once_per_agent
 from lanrocli.train.testset import records as _records
 from lanrocli.train.trainer import TrainSettings
-
 from tests.train.runs import Baseline, outcome, rows, scalars, tiny, train, wait_for_rows
 
 
@@ -49,8 +48,13 @@ def report(successes: list[bool], corrected: list[bool] | None = None) -> Evalua
     corrected = corrected or [False] * len(successes)
     return EvaluationReport(
         [
-            EpisodeResult(success=s, length=5, challenge="wrong_object" if c else None,
-                          form=CorrectionForm.EXCUSE if c else None, returned=-4.0)
+            EpisodeResult(
+                success=s,
+                length=5,
+                challenge="wrong_object" if c else None,
+                form=CorrectionForm.EXCUSE if c else None,
+                returned=-4.0,
+            )
             for s, c in zip(successes, corrected)
         ]
     )
@@ -208,7 +212,10 @@ def test_the_run_folder_has_every_file(straight: Baseline) -> None:
             if Split(split) in CONTROLLED:
                 control = record[CONTROL]
                 assert control["episodes"] == 2 and control["env"] == record["env"]
-                assert control["episodes_from"] == {"control_of": split, "first_seed": split_test_seed(5, 2, Split(split))}
+                assert control["episodes_from"] == {
+                    "control_of": split,
+                    "first_seed": split_test_seed(5, 2, Split(split)),
+                }
                 assert set(record[DROP]) == {"corrected"}
             else:
                 assert CONTROL not in record
@@ -235,7 +242,12 @@ def test_the_last_stage_ends_with_a_correction_test_of_both_agents(tmp_path: Pat
     for record in corrections.values():
         assert record["episodes_from"] == {"correction_test": True, "first_seed": correction_test_seed(5, 0)}
         assert record["env"]["correction_rate"] == 1.0 and record["env"]["negation_rate"] == 0.5
-        assert record["quota"] == {"spoken": quota.spoken, "negations": quota.negations, "episodes": quota.episodes, "second": 0}
+        assert record["quota"] == {
+            "spoken": quota.spoken,
+            "negations": quota.negations,
+            "episodes": quota.episodes,
+            "second": 0,
+        }
         assert record["episodes"] == quota.episodes or record["quota_met"]
     assert correction_test(tmp_path / "run" / "stage-1-third" / "last", quota).record == corrections["last"]
     assert "## Correction test" in (tmp_path / "run" / REPORT).read_text()
@@ -269,7 +281,9 @@ def test_resume_with_a_changed_curriculum_is_refused_with_the_difference(tmp_pat
     run = CurriculumRun.start(load_curriculum(path), out)
     run.run(should_stop=lambda: run.trainer.progress.env_steps >= 50)
     run.close()
-    path.write_text(path.read_text().replace("budget: {steps: 80}\n  - name: third", "budget: {steps: 90}\n  - name: third"))
+    path.write_text(
+        path.read_text().replace("budget: {steps: 80}\n  - name: third", "budget: {steps: 90}\n  - name: third")
+    )
     with pytest.raises(RunError, match="differs") as error:
         CurriculumRun.resume(out, load_curriculum(path))
     assert "-    steps: 80" in str(error.value) and "+    steps: 90" in str(error.value)
@@ -349,5 +363,7 @@ def test_a_stop_request_during_the_tests_stops_at_once_and_the_resumed_run_tests
     scripted(straight, iter([report([False, False])] * 2))
     assert straight.run()
     straight.close()
-    again, once = (json.loads((root / "stage-1-third" / TEST).read_text()) for root in (tmp_path / "run", tmp_path / "straight"))
+    again, once = (
+        json.loads((root / "stage-1-third" / TEST).read_text()) for root in (tmp_path / "run", tmp_path / "straight")
+    )
     assert again == once

@@ -6,6 +6,7 @@ import csv
 import json
 from pathlib import Path
 
+from lanrocli.train.report import correction_test_lines
 from lanrocli.train.runfolder import (
     BEST,
     LAST,
@@ -18,7 +19,6 @@ from lanrocli.train.runfolder import (
     read_pointer,
     truncate_metrics,
 )
-from lanrocli.train.report import correction_test_lines
 from lanrocli.train.writing import write_json
 
 
@@ -68,13 +68,19 @@ def test_a_metrics_file_of_an_older_version_gains_the_new_columns_and_still_plot
     old = ["stage", "stage_name", "env_steps", "success", "correction_success", "corrected_episodes_negation"]
     path = tmp_path / METRICS
     path.write_text(",".join(old) + "\n1,first,40,0.5,0.25,3\n")
-    append_metrics(path, {"stage": 1, "stage_name": "first", "env_steps": 80, "success": 0.75, "corrected_success": 1.0})
+    append_metrics(
+        path, {"stage": 1, "stage_name": "first", "env_steps": 80, "success": 0.75, "corrected_success": 1.0}
+    )
     with open(path, newline="") as f:
         reader = csv.DictReader(f)
         rows = list(reader)
         assert list(reader.fieldnames or ()) == [*METRIC_COLUMNS, "correction_success"]
     assert [r["success"] for r in rows] == ["0.5", "0.75"]
-    assert (rows[0]["correction_success"], rows[0]["corrected_episodes_negation"], rows[0]["corrected_success"]) == ("0.25", "3", "")
+    assert (rows[0]["correction_success"], rows[0]["corrected_episodes_negation"], rows[0]["corrected_success"]) == (
+        "0.25",
+        "3",
+        "",
+    )
     assert rows[1]["corrected_success"] == "1.0"
     assert read_run(tmp_path).steps.tolist() == [40, 80]
     assert align_metrics(path) == []  # once aligned, the file is left alone
@@ -90,11 +96,15 @@ def test_aligning_names_the_columns_gained(tmp_path: Path) -> None:
 def correction_record(agent: str, spoken: int, negations: int) -> dict:
     rate = lambda n, s: {"episodes": n, "success": s, "ci": [0.0, 1.0]}  # noqa: E731
     return {
-        "checkpoint": f"stage-3-third/{agent}-0000000240", "episodes": 400, "quota_met": True,
+        "checkpoint": f"stage-3-third/{agent}-0000000240",
+        "episodes": 400,
+        "quota_met": True,
         "quota": {"spoken": 300, "negations": 150, "episodes": 3000},
         "corrected": rate(spoken, 0.5),
-        "by_kind": {"ambiguity": {**rate(200, 0.4), "corrected": rate(spoken - 20, 0.5)},
-                    "common_ground": {**rate(30, 0.4), "corrected": rate(20, 0.25)}},
+        "by_kind": {
+            "ambiguity": {**rate(200, 0.4), "corrected": rate(spoken - 20, 0.5)},
+            "common_ground": {**rate(30, 0.4), "corrected": rate(20, 0.25)},
+        },
         "by_form": {"excuse": rate(spoken - negations, 0.6), "negation": rate(negations, 0.4), "edit": rate(0, None)},
         "attention_on_goal": {"plain": 0.5, "excuse": 0.75, "negation": None, "edit": None},
     }
@@ -110,4 +120,3 @@ def test_report_md_shows_the_correction_test_and_marks_what_is_not_judged() -> N
     assert cells["ambiguity"] == "50% (280)" and cells["common ground"] == "25% (20)*"
     assert cells["after a negation"] == "40% (150)" and cells["after an edit"] == "-"
     assert "| last | 0.50 | 0.75 | - | - |" in lines
-

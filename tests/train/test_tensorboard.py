@@ -10,7 +10,6 @@ from tensorboard.plugins.hparams import plugin_data_pb2
 
 from lanrocli.config.curriculum import load_curriculum
 from lanrocli.train.tensorboard import EVALUATION_FIGURES, TRAIN_POINTS, TensorBoard
-
 from tests.train.runs import Baseline, rows
 
 

@@ -7,20 +7,20 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 import pytest
 
+from lanrocli.agent.policy import AgentPolicy
 from lanrocli.agent.settings import BufferSettings, SACSettings
-from lanrocli.evaluation.metrics import ATTENTION, PHASES, PLAIN
+from lanrocli.core.seeds import correction_test_seed, held_out_seed
+from lanrocli.envs.policies import arm_view
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.evaluation.metrics import ATTENTION, PHASES, PLAIN
+from lanrocli.evaluation.quota import CorrectionQuota
 from lanrocli.language import Vocabulary
 from lanrocli.language import vocabulary as vocabulary_module
-from lanrocli.train.checkpoint import load_checkpoint, save_checkpoint
-from lanrocli.core.seeds import correction_test_seed, held_out_seed
-from lanrocli.evaluation.quota import CorrectionQuota
-from lanrocli.envs.policies import arm_view
 from lanrocli.tasks import OracleMemory, make_task
 from lanrocli.train import testset as testset_module
+from lanrocli.train.checkpoint import load_checkpoint, save_checkpoint
 from lanrocli.train.testset import (
     CORRECTION_TEST_NEGATION_RATE,
     _load,
@@ -28,7 +28,6 @@ from lanrocli.train.testset import (
     correction_test,
     measure,
 )
-from lanrocli.agent.policy import AgentPolicy
 from lanrocli.train.trainer import Trainer, TrainSettings
 
 STAGE = EnvSettings(objects=2, correction_rate=0.5, negations=True, max_episode_steps=8)

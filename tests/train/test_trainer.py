@@ -69,7 +69,7 @@ def test_half_an_update_per_step_makes_half_the_updates() -> None:
     trainer.run(200)
     trainer.close()
     ready = trainer.progress.updates  # updates start once 64 stored steps are whole episodes
-    assert 0 < ready and ready <= (200 - 64) / 2 + 1
+    assert ready > 0 and ready <= (200 - 64) / 2 + 1
 
 
 def test_random_starts_are_for_training_only() -> None:
@@ -90,7 +90,10 @@ def test_evaluations_may_speak_corrections_in_every_episode_while_training_keeps
     assert None in challenges[0] and any(c is not None for c in challenges[0])
     assert None not in challenges[1]
     assert TrainSettings.from_dict(settings.to_dict()) == settings
-    assert TrainSettings.from_dict({k: v for k, v in SETTINGS.to_dict().items() if k != "eval_correction_rate"}) == SETTINGS
+    assert (
+        TrainSettings.from_dict({k: v for k, v in SETTINGS.to_dict().items() if k != "eval_correction_rate"})
+        == SETTINGS
+    )
     training.close()
     evaluation.close()
 
@@ -101,7 +104,9 @@ def test_sentences_have_room_for_the_longest_chain_of_corrections_from_the_first
     env = trainer.env_factory()()
     try:
         assert trainer.vocabulary.max_length == trainer.buffer.vocabulary.max_length == 16
-        assert env.observation_space["instruction"].shape == (16,) and env.reset(seed=0)[0]["instruction"].shape == (16,)
+        assert env.observation_space["instruction"].shape == (16,) and env.reset(seed=0)[0]["instruction"].shape == (
+            16,
+        )
     finally:
         env.close()
         trainer.close()
@@ -171,7 +176,9 @@ from lanrocli.envs.settings import EnvSettings
 from lanrocli.train.runfolder import LATEST, prune, write_pointer
 from lanrocli.train.trainer import Trainer, TrainSettings
 out = Path(sys.argv[1])
-trainer = Trainer(TrainSettings(task="reach", env=EnvSettings(objects=2), learning_starts=10_000, buffer=BufferSettings(size=2000)), SACSettings())
+buffer = BufferSettings(size=2000)
+settings = TrainSettings(task="reach", env=EnvSettings(objects=2), learning_starts=10_000, buffer=buffer)
+trainer = Trainer(settings, SACSettings())
 while True:
     trainer.run(trainer.progress.env_steps + 1)
     directory = trainer.save(out / f"step-{trainer.progress.env_steps:06d}")

@@ -65,24 +65,32 @@ class _Scene:
         self._cache: dict[tuple, list[Phrase]] = {}
 
     def identifying(self, target: int) -> list[Phrase]:
-        return self._get(("identifying", target), lambda: identifying_phrases(
-            self.objects[target], [o for i, o in enumerate(self.objects) if i != target]
-        ))
+        return self._get(
+            ("identifying", target),
+            lambda: identifying_phrases(self.objects[target], [o for i, o in enumerate(self.objects) if i != target]),
+        )
 
     def openings(self, kind: Kind, target: int, named: int | None) -> list[Phrase]:
-        return self._get(("opening", kind, target, named), lambda: self.holdout.instruction_phrases(
-            opening_phrases(kind, self.objects, target, named), None
-        ))
+        return self._get(
+            ("opening", kind, target, named),
+            lambda: self.holdout.instruction_phrases(opening_phrases(kind, self.objects, target, named), None),
+        )
 
     def negations(self, kind: Kind, phrase: Phrase, target: int, touched: int) -> list[Phrase]:
-        return self._get(("not", kind, phrase, target, touched), lambda: self.holdout.correction_phrases(
-            negation_phrases(self.objects, target, touched, candidates(kind, phrase, self.objects)), None
-        ))
+        return self._get(
+            ("not", kind, phrase, target, touched),
+            lambda: self.holdout.correction_phrases(
+                negation_phrases(self.objects, target, touched, candidates(kind, phrase, self.objects)), None
+            ),
+        )
 
     def naming(self, kind: Kind, phrase: Phrase, target: int) -> list[Phrase]:
-        return self._get(("name", kind, phrase, target), lambda: self.holdout.correction_phrases(
-            naming_phrases(self.objects, target, candidates(kind, phrase, self.objects)), None
-        ))
+        return self._get(
+            ("name", kind, phrase, target),
+            lambda: self.holdout.correction_phrases(
+                naming_phrases(self.objects, target, candidates(kind, phrase, self.objects)), None
+            ),
+        )
 
     def _get(self, key: tuple, compute) -> list[Phrase]:  # type: ignore[no-untyped-def]
         if key not in self._cache:

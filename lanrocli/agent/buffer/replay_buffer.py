@@ -35,8 +35,8 @@ class ReplayBuffer:
 
     ``pool_rows``: relabelling sentences drawn per object and style when an episode is added (fewer for
     episodes shorter than that, as the pool is stored in the episode's own slots). ``negations``: whether
-    corrected relabelling sentences may use ``not``; ``holdout``: what they may never say. ``seed`` drives those draws; the generator's state is saved with the
-    buffer so a resumed run draws the same sentences.
+    corrected relabelling sentences may use ``not``; ``holdout``: what they may never say. ``seed`` drives those
+    draws; the generator's state is saved with the buffer so a resumed run draws the same sentences.
 
     The arrays are allocated with ``np.zeros``, which the operating system backs with memory only as slots
     are first written, so a large capacity costs little until it fills.
@@ -278,4 +278,3 @@ class ReplayBuffer:
         buffer.size = meta["size"]
         buffer.episodes_added = meta["episodes_added"]
         return buffer
-

@@ -84,4 +84,3 @@ def _touched(
     drawn = (target + 1 + rng.integers(0, np.maximum(n - 1, 1))) % np.maximum(n, 1)
     touched = np.where(first.min(axis=1) < NEVER, np.argmin(first, axis=1), drawn)
     return touched, n > 1
-

@@ -78,7 +78,9 @@ class Batch:
         return self.named >= 0
 
 
-def stored_arrays(obs_dim: int, action_dim: int, max_objects: int, length: int) -> dict[str, tuple[type, tuple[int, ...]]]:
+def stored_arrays(
+    obs_dim: int, action_dim: int, max_objects: int, length: int
+) -> dict[str, tuple[type, tuple[int, ...]]]:
     """The buffer's arrays: name -> (dtype, shape after the slot axis), in terms of the buffer's dimensions;
     the comments say what the less obvious ones are for."""
     return {

@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from collections.abc import Callable
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -16,17 +16,17 @@ from rich.console import Console
 from rich.markup import escape
 
 from lanrocli.cli.arguments import device_option, env_changes, err_console, fail, with_env_options
-from lanrocli.core.choices import ActingAttention, Instruction, Split
-from lanrocli.tasks import Task
 from lanrocli.cli.display.commands import env_summary, print_evaluation
+from lanrocli.core.choices import ActingAttention, Instruction, Split
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.tasks import Task
 
 if TYPE_CHECKING:
     from lanrocli.train.testset import Measurement
     from lanrocli.train.trainer import TrainSettings
 
 
-class PolicyName(str, Enum):
+class PolicyName(StrEnum):
     oracle = "oracle"
     mistaken = "mistaken"
     random = "random"
@@ -64,7 +64,9 @@ def evaluate_command(
     ] = Instruction.TRUE,
     device: Annotated[
         str | None,
-        typer.Option(callback=device_option, help="cpu, cuda or cuda:N for a trained agent (default: cuda if available)."),
+        typer.Option(
+            callback=device_option, help="cpu, cuda or cuda:N for a trained agent (default: cuda if available)."
+        ),
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
     gif: Annotated[Path | None, typer.Option(help="Write the first episodes as an animated GIF here.")] = None,
@@ -108,18 +110,24 @@ def evaluate_command(
     correction, with 95% intervals. For a checkpoint, the environment defaults to the stage it was trained on
     and the episodes to that stage's held-out test episodes; options change them."""
     from lanrocli.envs.env import LanroEnv
-    from lanrocli.evaluation.evaluate import evaluate
     from lanrocli.envs.policies import make_policy
+    from lanrocli.evaluation.evaluate import evaluate
 
     changes = env_changes(env_options)
     if correction_test and (seed is not None or instruction is not Instruction.TRUE or gif is not None):
-        raise fail("--correction-test runs episodes of its own, as the sentence the instructor speaks; leave out "
-                   "--seed, --instruction and --gif")
+        raise fail(
+            "--correction-test runs episodes of its own, as the sentence the instructor speaks; leave out "
+            "--seed, --instruction and --gif"
+        )
     if second_corrections is not None and not correction_test:
         raise fail("--second-corrections sets how long the correction test runs; add --correction-test")
-    if split is not None and (correction_test or seed is not None or instruction is not Instruction.TRUE or gif or changes):
-        raise fail("--split runs the split's own episodes and settings; leave out --correction-test, --seed, "
-                   "--instruction, --gif and the environment options")
+    if split is not None and (
+        correction_test or seed is not None or instruction is not Instruction.TRUE or gif or changes
+    ):
+        raise fail(
+            "--split runs the split's own episodes and settings; leave out --correction-test, --seed, "
+            "--instruction, --gif and the environment options"
+        )
     if what in {p.value for p in PolicyName}:
         if split is not None:
             raise fail("--split measures a trained agent on what its run held out; a scripted policy has no run")
@@ -130,7 +138,9 @@ def evaluate_command(
         if instruction is not Instruction.TRUE:
             raise fail("--instruction changes what a trained agent reads; scripted policies read no sentence")
         if acting_attention is not None:
-            raise fail("--acting-attention changes how a trained agent reads the scene; scripted policies attend to nothing")
+            raise fail(
+                "--acting-attention changes how a trained agent reads the scene; scripted policies attend to nothing"
+            )
         task_name = task or Task.REACH
         first = 0 if seed is None else seed
         try:
@@ -148,7 +158,10 @@ def evaluate_command(
         agent = _trained_agent(what)
         measurement = _measure_checkpoint(agent, task, device, _split_test(agent, split, episodes, acting_attention))
         report, record, task_name, env_settings = (
-            measurement.report, measurement.record, measurement.settings.task, measurement.env
+            measurement.report,
+            measurement.record,
+            measurement.settings.task,
+            measurement.env,
         )
         where = f"the {split.value} split's held-out episodes"
     elif correction_test:
@@ -157,7 +170,10 @@ def evaluate_command(
             agent, task, device, _correction_test(agent, changes, episodes, second_corrections, acting_attention)
         )
         report, record, task_name, env_settings = (
-            measurement.report, measurement.record, measurement.settings.task, measurement.env
+            measurement.report,
+            measurement.record,
+            measurement.settings.task,
+            measurement.env,
         )
         quota = record["quota"]
         negations = f" and {quota['negations']} negations" if quota["negations"] else ""
@@ -170,7 +186,10 @@ def evaluate_command(
             agent, task, device, _test(agent, changes, episodes, seed, instruction, gif, acting_attention)
         )
         report, record, task_name, env_settings = (
-            measurement.report, measurement.record, measurement.settings.task, measurement.env
+            measurement.report,
+            measurement.record,
+            measurement.settings.task,
+            measurement.env,
         )
         where = "held-out test episodes" if measurement.held_out else f"seed {measurement.first_seed}"
         if instruction is not Instruction.TRUE:
@@ -179,7 +198,9 @@ def evaluate_command(
         where += ", acting on the object it attends to most"
     if record.get("unknown_words"):
         unknown = ", ".join(record["unknown_words"])
-        err_console.print(f"[bold yellow]warning:[/] {escape(f'the agent never learned the words {unknown}: it reads each as <unk>')}")
+        err_console.print(
+            f"[bold yellow]warning:[/] {escape(f'the agent never learned the words {unknown}: it reads each as <unk>')}"
+        )
     if as_json:
         typer.echo(json.dumps(record))
         return
@@ -249,8 +270,8 @@ def _split_test(path: Path, split: Split, episodes: int | None, acting: ActingAt
 
 def _trained_agent(what: str) -> Path:
     """The checkpoint path ``what`` names, or the shipped agent of that name (``lanro eval push``)."""
-    from lanrocli.train.errors import CheckpointError
     from lanrocli.pretrained import agent_path
+    from lanrocli.train.errors import CheckpointError
 
     try:
         return agent_path(Path(what))
@@ -282,9 +303,9 @@ def _measure_checkpoint(path: Path, task: Task | None, device: str | None, run: 
 
 def _test_episodes(path: Path) -> int:
     """The test-set size of the run that ``path`` belongs to, so ``lanro eval`` repeats what report.md quotes."""
-    from lanrocli.train.checkpoint import resolve_checkpoint
     from lanrocli.config.curriculum import Curriculum, CurriculumError, load_curriculum
     from lanrocli.config.sections import HeldOutConfig
+    from lanrocli.train.checkpoint import resolve_checkpoint
     from lanrocli.train.runfolder import CONFIG
 
     config = resolve_checkpoint(path).parent.parent / CONFIG

@@ -12,16 +12,20 @@ from lanrocli.cli.arguments import fail
 
 
 def export_command(
-    source: Annotated[Path, typer.Argument(help="A checkpoint, a pointer such as RUN/stage-3-negations/last, or a run folder.")],
-    out: Annotated[Path, typer.Option(help="The folder to write, which must not exist (lanrocli/pretrained/NAME to ship it).")],
+    source: Annotated[
+        Path, typer.Argument(help="A checkpoint, a pointer such as RUN/stage-3-negations/last, or a run folder.")
+    ],
+    out: Annotated[
+        Path, typer.Option(help="The folder to write, which must not exist (lanrocli/pretrained/NAME to ship it).")
+    ],
     commit: Annotated[str, typer.Option(help="The commit the agent was trained at, recorded with it.")],
 ) -> None:
     """Write a trained agent's policy alone, with where it came from: an agent to ship.
 
     The folder holds the commit, seed and test figures the agent came from; lanro eval NAME and lanro play
     NAME find the agents in lanrocli/pretrained."""
-    from lanrocli.train.errors import CheckpointError
     from lanrocli.pretrained import export_agent
+    from lanrocli.train.errors import CheckpointError
 
     if out.exists():
         raise fail(f"--out {out} exists; give a new folder")

@@ -9,17 +9,21 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from lanrocli.tasks import Task
 from lanrocli.cli.display.commands import print_grammar_stats, print_sampled, write_sentences_json
 from lanrocli.language import all_sentences, grammar_vocabulary, sample_sentence, sentence_stats
+from lanrocli.tasks import Task
 
 
 def sample_instructions(
     task: Annotated[Task, typer.Option(help="Task whose verbs the instructor uses.")] = Task.REACH,
     n: Annotated[int, typer.Option("--n", min=1, help="How many sentences to sample.")] = 10,
     seed: Annotated[int, typer.Option(min=0, help="Random seed; the same seed gives the same sentences.")] = 0,
-    corrections: Annotated[bool, typer.Option("--corrections", help="Append a correction to each instruction.")] = False,
-    negations: Annotated[bool, typer.Option("--negations", help="Allow the negation beginning ('not the ...').")] = False,
+    corrections: Annotated[
+        bool, typer.Option("--corrections", help="Append a correction to each instruction.")
+    ] = False,
+    negations: Annotated[
+        bool, typer.Option("--negations", help="Allow the negation beginning ('not the ...').")
+    ] = False,
     rare: Annotated[bool, typer.Option("--rare", help="Allow rare colour words in instructions.")] = False,
     enumerate_all: Annotated[
         bool, typer.Option("--all", help="Enumerate every sentence of the grammar instead of sampling.")

@@ -10,8 +10,8 @@ import typer
 from rich.console import Console
 
 from lanrocli.cli.arguments import device_option, env_changes, fail, with_env_options
-from lanrocli.tasks import Task
 from lanrocli.envs.settings import CORRECTION_LIMIT
+from lanrocli.tasks import Task
 
 
 @with_env_options(
@@ -40,9 +40,12 @@ def play_command(
         str | None, typer.Option(callback=device_option, help="cpu, cuda or cuda:N (default: cuda if available).")
     ] = None,
     gif: Annotated[
-        Path | None, typer.Option(help="Folder for one GIF per episode (episode-1.gif, ...), captioned with the sentence.")
+        Path | None,
+        typer.Option(help="Folder for one GIF per episode (episode-1.gif, ...), captioned with the sentence."),
     ] = None,
-    gui: Annotated[bool, typer.Option("--gui", help="Show the episodes in PyBullet's window (needs a display).")] = False,
+    gui: Annotated[
+        bool, typer.Option("--gui", help="Show the episodes in PyBullet's window (needs a display).")
+    ] = False,
     **env_options: Any,
 ) -> None:
     """Give a trained agent instructions yourself, and correct it while it acts.

@@ -11,8 +11,8 @@ import typer
 from lanrocli.cli.arguments import CURRICULUM_HELP, SETTINGS, fail, load_plan
 
 if TYPE_CHECKING:
-    from lanrocli.sweep.plan import Trial
     from lanrocli.config.curriculum import Curriculum
+    from lanrocli.sweep.plan import Trial
 
 
 def sweep_command(
@@ -24,14 +24,22 @@ def sweep_command(
         ),
     ] = None,
     out: Annotated[
-        Path | None, typer.Option(help="Sweep folder: sweep.yaml and one run folder per trial (default: sweeps/<name>).")
+        Path | None,
+        typer.Option(help="Sweep folder: sweep.yaml and one run folder per trial (default: sweeps/<name>)."),
     ] = None,
     seeds: Annotated[
-        list[str] | None, typer.Option("--seeds", metavar="SEED ...", help="Seeds, each a trial: --seeds 0 1 2 (default: the curriculum's).")
+        list[str] | None,
+        typer.Option(
+            "--seeds", metavar="SEED ...", help="Seeds, each a trial: --seeds 0 1 2 (default: the curriculum's)."
+        ),
     ] = None,
     changes: Annotated[
         list[str] | None,
-        typer.Option("--set", metavar=SETTINGS, help="KEY=VALUE changed for every trial, by the curriculum's key paths: agent.critics=2."),
+        typer.Option(
+            "--set",
+            metavar=SETTINGS,
+            help="KEY=VALUE changed for every trial, by the curriculum's key paths: agent.critics=2.",
+        ),
     ] = None,
     grid: Annotated[
         list[str] | None,
@@ -84,7 +92,8 @@ def sweep_command(
         console, outcome = run_trials(out, trials, cpus_per_trial, gpus_per_trial, max_concurrent, address)
     except KeyboardInterrupt:
         raise fail(
-            f"aborted: running trials ended without a checkpoint of this moment; resume with: {resume_command(out)}", 130
+            f"aborted: running trials ended without a checkpoint of this moment; resume with: {resume_command(out)}",
+            130,
         ) from None
     code = print_outcome(console, outcome.statuses, outcome.errors, out)
     if code:
@@ -92,24 +101,34 @@ def sweep_command(
 
 
 def _open_sweep(
-    curriculum: str | None, out: Path | None, seeds: list[str], changes: list[str], grid: list[str], quick: bool, resume: bool
+    curriculum: str | None,
+    out: Path | None,
+    seeds: list[str],
+    changes: list[str],
+    grid: list[str],
+    quick: bool,
+    resume: bool,
 ) -> tuple[Path, list[tuple[Trial, Curriculum]]]:
     """The sweep folder and every trial of the sweep, new or resumed, each trial checked before the folder is
     touched; every problem is a clear error."""
-    from lanrocli.sweep import plan as sweeps
     from lanrocli.config.curriculum import CurriculumError
     from lanrocli.config.overrides import SettingError
+    from lanrocli.sweep import plan as sweeps
 
     spec = None
     if curriculum is not None or quick:
         base = load_plan(curriculum, quick, None, None)
         try:
-            spec = sweeps.SweepSpec.from_options(base, str(curriculum or "curricula/quick.yaml"), quick, seeds, changes, grid)
+            spec = sweeps.SweepSpec.from_options(
+                base, str(curriculum or "curricula/quick.yaml"), quick, seeds, changes, grid
+            )
         except (sweeps.SweepError, SettingError) as error:
             raise fail(str(error)) from None
     elif not resume:
-        raise fail("give a curriculum (a YAML file, or a packaged one by name: 'lanro check' lists them), --quick for "
-                   "the built-in one, or --resume")
+        raise fail(
+            "give a curriculum (a YAML file, or a packaged one by name: 'lanro check' lists them), --quick for "
+            "the built-in one, or --resume"
+        )
     elif seeds or changes or grid:
         raise fail("--seeds, --set and --grid need the curriculum file they apply to")
     if out is None:

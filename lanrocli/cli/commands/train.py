@@ -32,7 +32,9 @@ def check_command(
     ] = False,
     changes: Annotated[
         list[str] | None,
-        typer.Option("--set", metavar=SETTINGS, help="KEY=VALUE changed in the plan shown, as 'lanro train --set' does."),
+        typer.Option(
+            "--set", metavar=SETTINGS, help="KEY=VALUE changed in the plan shown, as 'lanro train --set' does."
+        ),
     ] = None,
 ) -> None:
     """Validate a curriculum and print the resolved plan (stages, budgets, total steps) without training."""
@@ -56,7 +58,9 @@ def train_command(
     ] = None,
     out: Annotated[Path | None, typer.Option(help="Run folder (default: checkpoints/<curriculum name>).")] = None,
     seed: Annotated[int | None, typer.Option(min=0, help="Override the curriculum's seed.")] = None,
-    envs: Annotated[int | None, typer.Option(min=1, max=64, help="Override the number of parallel environments.")] = None,
+    envs: Annotated[
+        int | None, typer.Option(min=1, max=64, help="Override the number of parallel environments.")
+    ] = None,
     device: Annotated[
         str | None, typer.Option(callback=device_option, help="cpu, cuda or cuda:N (default: cuda if available).")
     ] = None,
@@ -91,8 +95,10 @@ def train_command(
 ) -> None:
     """Train an agent through a curriculum of stages, with evaluation, checkpoints and resume."""
     if curriculum is None and not quick and not resume:
-        raise fail("give a curriculum (a YAML file, or a packaged one by name: 'lanro check' lists them), or --quick "
-                   "for the built-in one")
+        raise fail(
+            "give a curriculum (a YAML file, or a packaged one by name: 'lanro check' lists them), or --quick "
+            "for the built-in one"
+        )
     if source is not None and (resume or curriculum is None and not quick):
         raise fail("--from starts a new run from another run's stages: give the curriculum to run, without --resume")
     if curriculum is None and not quick and changes:
@@ -103,9 +109,9 @@ def train_command(
     import torch
 
     from lanrocli.cli.display.training import StopRequest, TrainingDisplay
+    from lanrocli.config.curriculum import CurriculumError
     from lanrocli.train.branch import branch
     from lanrocli.train.checkpoint import CheckpointWriteError
-    from lanrocli.config.curriculum import CurriculumError
     from lanrocli.train.errors import RunError
     from lanrocli.train.pipeline import CurriculumRun
     from lanrocli.train.trainer import pick_device
@@ -150,7 +156,8 @@ def train_command(
             raise fail(f"{error}\nresume with: {resume_hint}", code=1) from None
         except OSError as error:
             raise fail(
-                f"the run stopped: {error}. Its newest checkpoint is whole; fix the cause and resume with: {resume_hint}",
+                f"the run stopped: {error}. Its newest checkpoint is whole; "
+                f"fix the cause and resume with: {resume_hint}",
                 code=1,
             ) from None
         finally:

@@ -19,8 +19,8 @@ from lanrocli.language import Sentence, Vocabulary
 from lanrocli.language.grammar import SentenceStats
 
 if TYPE_CHECKING:
-    from lanrocli.evaluation.evaluate import EvaluationReport
     from lanrocli.config.curriculum import Curriculum
+    from lanrocli.evaluation.evaluate import EvaluationReport
 
 
 def print_grammar_stats(task: str, stats: SentenceStats, vocab: Vocabulary) -> None:
@@ -174,7 +174,9 @@ def print_plan(plan: Curriculum) -> None:
             for f in dataclasses.fields(settings)
             if getattr(default, f.name) != getattr(settings, f.name)
         }
-        console.print(f"{name}: default settings ({type(settings).__name__}){', except ' + str(changed) if changed else ''}")
+        console.print(
+            f"{name}: default settings ({type(settings).__name__}){', except ' + str(changed) if changed else ''}"
+        )
     for i, stage in enumerate(plan.stages):
         if own_keys := {key: value for key, value in stage.buffer.model_dump().items() if value is not None}:
             console.print(f"  stage {i + 1} ({stage.name}) samples with {own_keys}")

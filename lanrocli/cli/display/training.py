@@ -15,16 +15,17 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-from lanrocli.train.progress import StepRate, evaluation_summary, rule_text, stage_end_line
-from lanrocli.train.stop import StopRequest
-from lanrocli.train.pipeline import CurriculumRun, RunObserver
-from lanrocli.train.runstate import StageResult
 from lanrocli.config.sections import Stage
+from lanrocli.train.pipeline import CurriculumRun, RunObserver
+from lanrocli.train.progress import StepRate, evaluation_summary, rule_text, stage_end_line
+from lanrocli.train.runstate import StageResult
+from lanrocli.train.stop import StopRequest
 
 __all__ = ["StopRequest", "TrainingDisplay"]
 
 PLAIN_INTERVAL = 60.0
 """Seconds between progress lines when the output is not a terminal."""
+
 
 class TrainingDisplay(RunObserver):
     """Draws a run's progress live (``live=True``) or as plain periodic lines."""
@@ -67,7 +68,8 @@ class TrainingDisplay(RunObserver):
 
     def on_stage_start(self, run: CurriculumRun, stage: Stage) -> None:
         index = run.state.stage
-        header = f"stage {index + 1}/{len(run.curriculum.stages)} {stage.name}: {stage.budget.steps:,} steps, {rule_text(stage)}"
+        budget = f"{stage.budget.steps:,} steps, {rule_text(stage)}"
+        header = f"stage {index + 1}/{len(run.curriculum.stages)} {stage.name}: {budget}"
         self._rate.clear()
         if self._progress is not None:
             self._progress.console.print(header)

@@ -14,7 +14,6 @@ from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
 from lanrocli.agent.buffer.transitions import Batch, EpisodeData
 from lanrocli.agent.settings import BufferSettings
 from lanrocli.core.choices import CorrectionForm
-
 from tests.agent.episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
 from tests.agent.sentences import parse, referents
 
@@ -211,7 +210,10 @@ def test_state_round_trips_exactly_after_wrapping() -> None:
     # Plain data: the metadata survives JSON, and the arrays are copied out of the buffer's own.
     loaded = ReplayBuffer.from_state(json.loads(json.dumps(meta)), {k: v.copy() for k, v in arrays.items()})
     assert (loaded.capacity, loaded.position, loaded.high, len(loaded)) == (
-        buffer.capacity, buffer.position, buffer.high, len(buffer)
+        buffer.capacity,
+        buffer.position,
+        buffer.high,
+        len(buffer),
     )
     for name, array in buffer.data.items():
         assert array.dtype == loaded.data[name].dtype

@@ -10,7 +10,6 @@ from hypothesis import strategies as st
 from lanrocli.agent.buffer.relabel import sentence_pool
 from lanrocli.core.choices import CorrectionForm
 from lanrocli.language import COLOURS, SHAPES, TASKS, ObjectProps, all_sentences, grammar_vocabulary
-
 from tests.agent.sentences import parse, referents
 
 VOCAB = grammar_vocabulary()
