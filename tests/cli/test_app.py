@@ -215,10 +215,11 @@ def test_eval_writes_a_gif(tmp_path) -> None:
 
 @pytest.mark.slow
 def test_quick_training_run_then_eval_plot_and_refusals(tmp_path) -> None:
-    """The README's first command on its built-in curriculum, scaled down further (``quick.yaml --quick``) to
-    keep the suite short, and what can be done with its run folder."""
+    """The README's first command on its built-in curriculum, scaled down further (``quick.yaml --quick``, its
+    tests on four episodes, which scales the correction test too) to keep the suite short, and what can be
+    done with its run folder."""
     out = tmp_path / "run"
-    quick = ["train", str(QUICK), "--quick", "--out", str(out)]
+    quick = ["train", str(QUICK), "--quick", "--set", "test.episodes=4", "--out", str(out)]
     result = runner.invoke(app, quick)
     assert result.exit_code == 0, result.output
     for command in (f"lanro eval {out}", f"lanro plot {out} --out curves.png", f"lanro play {out}"):
