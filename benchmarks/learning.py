@@ -22,9 +22,9 @@ from typing import Any
 import torch
 
 from lanrocli.agent.settings import SACSettings
-from lanrocli.cli.display.training import StopRequest
 from lanrocli.config.curriculum import Curriculum
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
+from lanrocli.train.stop import StopRequest
 from lanrocli.train.trainer import pick_device
 
 AGENT = {"architecture": "objects"}

@@ -1,7 +1,8 @@
 """The networks of the language-conditioned SAC: a sentence encoder, a squashed-Gaussian actor and Q critics.
 
-Both actor and critic read an observation through a 128-unit layer and join it with a 32-number summary of
-the goal sentence (and, for the critic, the action) before the 256-unit hidden layers. The sentence summary
+Both actor and critic read an observation through a layer of ``SACSettings.obs_size`` units and join it with
+a summary of the goal sentence (``language_size`` numbers; for the critic, the action too) before the hidden
+layers (``hidden_size``). The sentence summary
 is computed by a :class:`~lanrocli.agent.encoder.LanguageEncoder` that each network holds as ``encoder``; the
 networks take the summary as an input rather than the tokens, so the agent decides whether actor and critic read the
 sentence through separate encoders (the default) or through the critic's one.
@@ -77,9 +78,7 @@ class SceneReader(nn.Module):
     after a correction, the one left after a negation). The layers that follow see the named object's
     position and offset from the hand directly, as in a scene of one object. Empty slots get no weight.
 
-    By default the other objects are left out: on the point-mass reach with 2 objects, adding a max-pooled
-    summary of all objects kept the agent near 0.3 training success for 20k steps, while the named object
-    alone reached 0.8 within 5k (``benchmarks/point_reach.py``, seed 0).
+    The other objects are left out, so the motor layers learn one scene, whichever object is named.
 
     ``members`` independent readers run together, one per critic of an ensemble; the output is
     [members, B, arm + object]: the arm's features, then the named object's.
@@ -98,8 +97,7 @@ class SceneReader(nn.Module):
         attention weights (empty slots at the dtype's minimum)."""
         objects = self.layout.split(obs)[1]
         keys = self.key(objects.reshape(-1, objects.shape[-1])).reshape(self.members, *present.shape, -1)
-        # Products and sums rather than einsum, which on CPU became batched matmuls of one row each and made
-        # an update slower (docs/performance.md); these are a few vectorised passes.
+        # Products and sums rather than einsum, which on CPU becomes batched matmuls of one row each.
         scores = (keys * self.query(language).unsqueeze(2)).sum(dim=-1) / math.sqrt(keys.shape[-1])
         return scores.masked_fill(~present, torch.finfo(scores.dtype).min)
 
@@ -127,7 +125,7 @@ def attention_loss(
 ) -> torch.Tensor:
     """The grounding loss: cross-entropy of the actor's and each critic's attention (logits [members, B,
     slots]) against the object that a transition's sentence names (``label`` [B], -1 where none is known),
-    averaged over the labelled rows; zero without object-wise readers, a weight of 0 or a labelled row
+    averaged over the labelled rows; zero without object-wise readers, with a weight of 0 or without a labelled row
     (``labelled``, known to the caller without reading ``label``), so that it costs nothing then."""
     if critic_scores is None or actor_scores is None or weight == 0.0 or not labelled:
         return torch.zeros((), device=label.device)

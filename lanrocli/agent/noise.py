@@ -20,16 +20,15 @@ def restore_generator(
     stream derived from the agent's ``seed`` and update count, so that the same checkpoint loaded the same
     way gives the same numbers, and warn that the stream changed."""
     saved = state["generator"].cpu()
-    saved_on = state.get("generator_device")
-    same_kind = saved_on == device_type
-    if same_kind:
+    saved_on = state["generator_device"]
+    if saved_on == device_type:
         generator.set_state(saved)
         return
     generator.manual_seed(int(np.random.SeedSequence([seed, updates]).generate_state(1)[0]))
     logger.warning(
         "the agent's exploration noise was saved on %s and cannot continue on %s; it restarts from a stream "
         "derived from the agent's seed (%d) and update count (%d)",
-        saved_on or "another device type",
+        saved_on,
         device_type,
         seed,
         updates,

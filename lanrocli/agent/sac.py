@@ -184,15 +184,31 @@ class SACAgent:
     def update(self, batch: Batch) -> dict[str, float]:
         """One SAC update of critic, actor and temperature on ``batch`` (:func:`~lanrocli.agent.losses.sac_losses`),
         then of the target critic. All losses are computed from the parameters as they were before the update
-        and touch disjoint parameters, so one backward pass of their sum and one optimiser step serve all."""
+        and touch disjoint parameters, so one backward pass of their sum and one optimiser step serve all.
+
+        With ``SACSettings.compile`` the losses are compiled where torch can build their kernels; where it
+        cannot (on CPU without a working C++ compiler, say), the update warns once and runs eagerly, drawing
+        the same noise, rather than a run dying at its first update.
+        """
+        if self._compiled is not None:
+            noise_state = self.generator.get_state()
+            try:
+                return self._update(batch, self._compiled)
+            except Exception as error:  # any failure to compile; a real error is raised again by the eager update
+                logger.warning("agent.compile: torch.compile failed here, the update runs eager: %s", error)
+                self._compiled = None
+                self.generator.set_state(noise_state)
+        return self._update(batch, sac_losses)
+
+    def _update(self, batch: Batch, losses: Losses) -> dict[str, float]:
         tokens = torch.as_tensor(np.concatenate([batch.instruction, batch.next_instruction]), device=self.device)
         sentences, inverse = distinct_sentences(tokens.to(torch.int64))
         *learning, target_encoder = self._update_encoders()
         with torch.no_grad():
             target_summaries = target_encoder(sentences)[inverse]
         summaries = torch.stack([*(encoder(sentences)[inverse] for encoder in learning), target_summaries])
-        loss, metrics = self._losses(summaries, update_tensors(self, self._sampled_tensors(batch)), batch.labelled)
-        self.optimizer.zero_grad(set_to_none=True)
+        loss, metrics = losses(self, summaries, update_tensors(self, self._sampled_tensors(batch)), batch.labelled)
+        self.optimizer.zero_grad()
         loss.backward()
         s = self.settings
         if s.max_grad_norm is not None:
@@ -204,18 +220,6 @@ class SACAgent:
                 target.lerp_(online, 1.0 - s.polyak)
         self.updates += 1
         return dict(zip(UPDATE_METRICS, metrics.tolist()))
-
-    def _losses(self, *inputs: Any) -> tuple[torch.Tensor, torch.Tensor]:
-        """:func:`sac_losses` of this agent, compiled where ``SACSettings.compile`` asks for it and torch can
-        build its kernels here; where it cannot (on CPU without a working C++ compiler, say) the update
-        stays eager, with a warning, rather than a run dying at its first update."""
-        if self._compiled is not None:
-            try:
-                return self._compiled(self, *inputs)
-            except Exception as error:  # any failure to compile; a real error is raised again by the eager call
-                logger.warning("agent.compile: torch.compile failed here, the update runs eager: %s", error)
-                self._compiled = None
-        return sac_losses(self, *inputs)
 
     def _sampled_tensors(self, batch: Batch) -> SampledTensors:
         """The batch as tensors, with the policy's noise for the next states and for these, drawn from the
@@ -314,8 +318,8 @@ class SACAgent:
             raise ValueError(f"agent state format {state['format']} is not {_FORMAT}")
         saved = SACSettings.from_dict(state["settings"])
         layout = None if self.layout is None else dataclasses.asdict(self.layout)
-        if state.get("layout") != layout:
-            raise ValueError(f"the saved agent reads observations laid out as {state.get('layout')}, this one {layout}")
+        if state["layout"] != layout:
+            raise ValueError(f"the saved agent reads observations laid out as {state['layout']}, this one {layout}")
         for name in ("obs_dim", "action_dim", "vocab_size"):
             if state[name] != getattr(self, name):
                 raise ValueError(f"the saved agent has {name} {state[name]}, this one {getattr(self, name)}")
@@ -342,14 +346,13 @@ class SACAgent:
 
     @classmethod
     def from_state_dict(cls, state: Mapping[str, Any], device: str | torch.device = "cpu") -> SACAgent:
-        """An agent rebuilt from its saved dimensions, settings and seed (0 for a state saved before the seed
-        was), then loaded."""
+        """An agent rebuilt from its saved dimensions, settings and seed, then loaded."""
         agent = cls(
             state["obs_dim"],
             state["action_dim"],
             state["vocab_size"],
             SACSettings.from_dict(state["settings"]),
-            seed=int(state.get("seed", 0)),
+            seed=int(state["seed"]),
             device=device,
             layout=RunningNormalizer.saved_layout(state["normalizer"]),
         )

@@ -45,7 +45,7 @@ class SACSettings:
     clip_target: bool = True
     """Clip Bellman targets to the returns eq. 1 allows, [-1 / (1 - gamma), 0], as HER does. Without it a
     critic extrapolates to positive values that no episode can earn, the actor chases them, and the
-    values diverge within tens of thousands of steps (measured on reach with 1 and with 2 critics)."""
+    values diverge."""
     embedding_size: int = 32
     language_size: int = 32
     """GRU hidden size: the length of the sentence summary."""
@@ -114,8 +114,8 @@ class SACSettings:
             raise ValueError(f"critics must be 1 or 2, got {self.critics}")
         if self.alpha <= 0.0:
             raise ValueError(f"alpha must be positive, got {self.alpha}")
-        if not 0.0 <= self.polyak <= 1.0 or not 0.0 <= self.gamma <= 1.0:
-            raise ValueError("gamma and polyak must lie in [0, 1]")
+        if not 0.0 <= self.polyak <= 1.0 or not 0.0 <= self.gamma < 1.0:
+            raise ValueError("gamma must lie in [0, 1) and polyak in [0, 1]")
         if not self.sentence_in_trunk and self.architecture != "objects":
             raise ValueError(
                 "sentence_in_trunk: false needs architecture 'objects': a flat network reads the sentence only there"
@@ -161,7 +161,7 @@ class BufferSettings:
     """Share of each batch drawn from the transitions that relabelling can turn into successes (their episode
     achieves the task on some object at that step or later); the rest is drawn uniformly. Sparse tasks need
     it: random arms touch objects rarely, so few stored transitions can be relabelled at all, and uniform
-    batches hold almost no success (docs/lab-notebook.md has the figures)."""
+    batches hold almost no success (docs/lab/lab-notebook.md has the figures)."""
     relabel_negations: bool = False
     """Relabelled corrections may be negations in every stage, not only in those whose instructor speaks
     them: an agent then meets "not the ..." from its first stage on."""

@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from lanrocli.agent.buffer.transitions import Batch
+from lanrocli.agent.losses import sac_losses
 from lanrocli.agent.sac import SACAgent
 from tests.agent.episodes import OBS_DIM
 from tests.agent.test_sac import _agent, _batch, _grounding_batch
@@ -48,17 +49,38 @@ def test_compiled_losses_give_the_eager_updates_gradients_for_each_agent_in_one_
         assert (want_metrics["grounding_loss"] > 0.0) == (settings["architecture"] == "objects")
 
 
-def test_an_update_that_cannot_be_compiled_runs_eager_and_says_so(caplog: pytest.LogCaptureFixture) -> None:
-    """Where torch cannot build its kernels (no working C++ compiler on CPU, say), the agent's first update
-    warns and computes what the eager agent computes, rather than a run dying at its first update."""
+class FailsBackward(torch.autograd.Function):
+    """The identity, whose backward fails as a compiled backward that cannot be built does."""
 
-    def fails(*args: object) -> None:
+    @staticmethod
+    def forward(ctx: object, x: torch.Tensor) -> torch.Tensor:
+        return x.clone()
+
+    @staticmethod
+    def backward(ctx: object, grad: torch.Tensor) -> torch.Tensor:
         raise RuntimeError("no C++ compiler works here")
 
+
+def _fails_forward(*args: object) -> None:
+    raise RuntimeError("no C++ compiler works here")
+
+
+def _fails_backward(*args: object) -> tuple[torch.Tensor, torch.Tensor]:
+    loss, metrics = sac_losses(*args)  # type: ignore[arg-type]
+    return FailsBackward.apply(loss), metrics
+
+
+@pytest.mark.parametrize("failing", [_fails_forward, _fails_backward], ids=["forward", "backward"])
+def test_an_update_that_cannot_be_compiled_runs_eager_and_says_so(
+    failing: object, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Where torch cannot build its kernels (no working C++ compiler on CPU, say), forward or backward, the
+    agent's first update warns and computes what the eager agent computes, with the same noise, rather than
+    a run dying at its first update."""
     rng = np.random.default_rng(0)
     batch = _grounding_batch(rng)
     eager, compiled = _agent(seed=1, architecture="objects"), _agent(seed=1, architecture="objects", compile=True)
-    compiled._compiled = fails  # type: ignore[assignment]
+    compiled._compiled = failing  # type: ignore[assignment]
     with caplog.at_level("WARNING", logger="lanrocli.agent.sac"):
         got_metrics, got = _gradients(compiled, batch)
     want_metrics, want = _gradients(eager, batch)
@@ -66,3 +88,4 @@ def test_an_update_that_cannot_be_compiled_runs_eager_and_says_so(caplog: pytest
     assert got_metrics == want_metrics
     assert all(torch.equal(a, b) for a, b in zip(got, want))
     assert compiled._compiled is None  # later updates do not try again
+    assert torch.equal(compiled.generator.get_state(), eager.generator.get_state())

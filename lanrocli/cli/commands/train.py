@@ -108,12 +108,13 @@ def train_command(
     # Only now: a bad curriculum is refused without waiting for torch and pybullet to load.
     import torch
 
-    from lanrocli.cli.display.training import StopRequest, TrainingDisplay
+    from lanrocli.cli.display.training import TrainingDisplay
     from lanrocli.config.curriculum import CurriculumError
     from lanrocli.train.branch import branch
     from lanrocli.train.checkpoint import CheckpointWriteError
     from lanrocli.train.errors import RunError
     from lanrocli.train.pipeline import CurriculumRun
+    from lanrocli.train.stop import StopRequest
     from lanrocli.train.trainer import pick_device
 
     if out is None:

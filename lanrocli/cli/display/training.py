@@ -19,9 +19,6 @@ from lanrocli.config.sections import Stage
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
 from lanrocli.train.progress import StepRate, evaluation_summary, rule_text, stage_end_line
 from lanrocli.train.runstate import StageResult
-from lanrocli.train.stop import StopRequest
-
-__all__ = ["StopRequest", "TrainingDisplay"]
 
 PLAIN_INTERVAL = 60.0
 """Seconds between progress lines when the output is not a terminal."""
