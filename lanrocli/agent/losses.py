@@ -110,7 +110,7 @@ def sac_losses(
     # Critic: regress on the soft Bellman target of the target critic and the current policy.
     with torch.no_grad():
         next_action, next_log_prob = actor.sample(
-            batch.next_obs, next_actor_language, None, batch.next_present, noise=batch.next_noise
+            batch.next_obs, next_actor_language, batch.next_noise, batch.next_present
         )
         next_q = agent.target_critic(batch.next_obs, next_target_language, next_action, batch.next_present)
         target_q = batch.reward + s.gamma * batch.not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
@@ -128,7 +128,7 @@ def sac_losses(
 
     # Actor: maximise the critic's value plus entropy. The critic judges the policy's actions in the states it
     # has just read, both held constant, so this loss sends gradient to the actor only.
-    pi_action, log_prob = actor.sample(batch.obs, actor_language, None, batch.present, actor_scores, noise=batch.noise)
+    pi_action, log_prob = actor.sample(batch.obs, actor_language, batch.noise, batch.present, actor_scores)
     q_pi = critic.value(observed.detach(), pi_action, frozen=True).min(dim=0).values
     actor_loss = (alpha * log_prob - q_pi).mean()
 

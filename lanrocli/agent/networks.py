@@ -199,22 +199,15 @@ class Actor(nn.Module):
         self,
         obs: torch.Tensor,
         language: torch.Tensor,
-        generator: torch.Generator | None,
+        noise: torch.Tensor,
         present: torch.Tensor | None = None,
         scores: torch.Tensor | None = None,
-        noise: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """A reparameterised action in [-1, 1] and its log-probability under the squashed Gaussian.
-
-        The noise comes from ``generator`` (never torch's global one) so that the agent's random stream is
-        part of its saved state and a resumed run draws the same actions; or it is given (``noise``, standard
-        normal, the action's shape), as a compiled update with fixed shapes needs.
-        """
+        """A reparameterised action in [-1, 1] and its log-probability under the squashed Gaussian, from the
+        standard normal ``noise`` (the action's shape). The caller draws it from the agent's own generator,
+        whose state is saved with the agent, so a resumed run draws the same actions."""
         mean, log_std = self(obs, language, present, scores)
-        std = log_std.exp()
-        if noise is None:
-            noise = torch.randn(mean.shape, generator=generator, device=mean.device, dtype=mean.dtype)
-        u = mean + std * noise
+        u = mean + log_std.exp() * noise
         gaussian_log_prob = (-0.5 * noise.pow(2) - log_std - 0.5 * math.log(2 * math.pi)).sum(dim=1)
         # Change of variables for a = tanh(u): log|da/du| = log(1 - tanh(u)^2), written in a form that
         # stays finite when tanh(u) saturates at +-1.

@@ -148,7 +148,7 @@ class SACAgent:
         else:
             x, present, language = self._acting_inputs(obs)
             noise = torch.randn(x.shape[0], self.action_dim, generator=self.generator, device=self.device)
-            actions = self.actor.sample(x, language, None, present, noise=noise)[0].cpu().numpy()
+            actions = self.actor.sample(x, language, noise, present)[0].cpu().numpy()
         return actions[0] if np.asarray(obs["observation"]).ndim == 1 else actions
 
     @torch.no_grad()

@@ -31,7 +31,7 @@ def _actor() -> Actor:
 def test_actor_log_prob_is_the_density_of_the_squashed_gaussian() -> None:
     actor = _actor()
     obs, language = torch.randn(64, 6), torch.randn(64, 32)
-    action, log_prob = actor.sample(obs, language, torch.Generator().manual_seed(1))
+    action, log_prob = actor.sample(obs, language, torch.randn(64, 3, generator=torch.Generator().manual_seed(1)))
     mean, log_std = actor(obs, language)
     squashed = torch.distributions.TransformedDistribution(
         torch.distributions.Normal(mean, log_std.exp()), [torch.distributions.TanhTransform()]
@@ -54,7 +54,7 @@ def test_log_prob_stays_finite_when_the_action_saturates() -> None:
     actor = _actor()
     with torch.no_grad():
         actor.mean.bias.fill_(30.0)
-    _, log_prob = actor.sample(torch.randn(16, 6), torch.randn(16, 32), torch.Generator().manual_seed(0))
+    _, log_prob = actor.sample(torch.randn(16, 6), torch.randn(16, 32), torch.randn(16, 3))
     assert torch.isfinite(log_prob).all()
 
 

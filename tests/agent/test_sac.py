@@ -217,7 +217,8 @@ def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
     tokens, next_tokens = torch.as_tensor(batch.instruction), torch.as_tensor(batch.next_instruction)
     alpha = r.log_alpha.exp()
     with torch.no_grad():  # the exploration noise is drawn in the update's order: next actions first
-        next_action, next_log_prob = r.actor.sample(next_obs, r.actor.encoder(next_tokens), r.generator, next_present)
+        noise = torch.randn(len(batch.obs), ACTION_DIM, generator=r.generator)
+        next_action, next_log_prob = r.actor.sample(next_obs, r.actor.encoder(next_tokens), noise, next_present)
         next_q = r.target_critic(next_obs, r.target_critic.encoder(next_tokens), next_action, next_present)
         not_done = 1.0 - torch.as_tensor(batch.done, dtype=torch.float32)
         soft_value = next_q.min(0).values - alpha * next_log_prob
@@ -227,7 +228,9 @@ def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
     q = r.critic(obs, critic_language, torch.as_tensor(batch.action), present)
     critic_loss = (q - target).pow(2).mean(dim=1).sum()
     actor_language = r.actor.encoder(tokens)
-    pi_action, log_prob = r.actor.sample(obs, actor_language, r.generator, present)
+    pi_action, log_prob = r.actor.sample(
+        obs, actor_language, torch.randn(len(batch.obs), ACTION_DIM, generator=r.generator), present
+    )
     q_pi = r.critic(obs, critic_language.detach(), pi_action, present).min(dim=0).values
     actor_loss = (alpha.detach() * log_prob - q_pi).mean()
     alpha_loss = -(r.log_alpha * (log_prob.detach() + r.target_entropy)).mean()
