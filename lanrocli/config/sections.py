@@ -222,6 +222,8 @@ class HoldoutConfig(BaseModel):
     """[first, last]: the delays of the split's corrections, all longer than any stage's max_delay."""
     common_ground: list[str] = []
     """Rare colour words never heard in training; the split's common-ground instructions use them."""
+    paraphrase: bool = False
+    """Test on the paraphrase split: corrections phrased as the grammar never phrases them."""
 
     @field_validator("*")
     @classmethod

@@ -55,6 +55,8 @@ class Split(StrEnum):
     """Corrections arrive later after the mistake than any in training."""
     COMMON_GROUND = "common_ground"
     """The instruction's rare colour word was never heard in training."""
+    PARAPHRASE = "paraphrase"
+    """Corrections phrased as the grammar never phrases them, some instructions with a verb never heard."""
 
 
 class ActingAttention(StrEnum):

@@ -7,11 +7,13 @@ evaluation episode is a training or test episode, whatever the run's seed or the
 Evaluation draws a new block for every evaluation (fresh episodes, yet the same ones when a resumed run
 repeats that evaluation); the test set is block 0 of its stage and never changes. The correction test
 (every episode a correction episode, as many as it takes to hear enough corrections) has a purpose of its
-own, so its episodes are none of the ordinary test's either, and so has each generalisation split.
+own, so its episodes are none of the ordinary test's either, and so has each generalisation split and
+the benchmark's protocols.
 """
 
 from __future__ import annotations
 
+import zlib
 from enum import IntEnum
 
 from lanrocli.core.choices import Split
@@ -25,6 +27,7 @@ class Purpose(IntEnum):
     TEST = 2
     CORRECTION_TEST = 3
     SPLIT_TEST = 4
+    BENCHMARK = 5
 
 
 def first_seed(purpose: Purpose, run_seed: int, stage: int, block: int = 0) -> int:
@@ -53,3 +56,9 @@ def correction_test_seed(run_seed: int, stage: int) -> int:
 def split_test_seed(run_seed: int, stage: int, split: Split) -> int:
     """First seed of a generalisation split's held-out episodes: each split is a block of its own."""
     return first_seed(Purpose.SPLIT_TEST, run_seed, stage, list(Split).index(split))
+
+
+def benchmark_seed(task: str, protocol: int) -> int:
+    """First seed of a benchmark protocol's episodes for ``task`` (:mod:`lanrocli.evaluation.protocols`):
+    fixed by the task's name and the protocol's number alone, so every lab plays the same ones."""
+    return first_seed(Purpose.BENCHMARK, zlib.crc32(task.encode()), protocol)

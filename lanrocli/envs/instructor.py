@@ -13,7 +13,7 @@ not ruled out yet, as conversational repair continues until the misunderstanding
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -29,10 +29,14 @@ from lanrocli.language import (
     correction_forms,
     extend,
     instruction,
+    max_sentence_words,
     pick,
 )
 from lanrocli.language.dialogue import candidates, naming_phrases, negation_phrases, opening_phrases
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
+from lanrocli.language.paraphrase import Scene as Referents
+from lanrocli.language.paraphrase import paraphrase_correction
+from lanrocli.tasks import task_class
 
 MAX_DELAY = 20
 """Most steps a correction may wait after the mistake: later, the arm has long moved on."""
@@ -40,6 +44,9 @@ MAX_DELAY = 20
 MAX_CORRECTIONS = 2
 """Most corrections in one episode: each needs a wrong object the arm has not been corrected on yet, and
 a scene has at most three objects."""
+
+PARAPHRASE_VERB_RATE = 0.5
+"""Share of the paraphrase split's instructions spoken with a verb training never heard."""
 
 
 @dataclass(frozen=True)
@@ -107,6 +114,8 @@ class Correction:
     triggered_at: int
     index: int = 1
     """Which correction of the episode this is: 1 for the first."""
+    phrasing: str | None = None
+    """The paraphrase it was spoken in (``lanrocli.language.paraphrase``), None for the grammar's words."""
 
     @property
     def negation(self) -> bool:
@@ -121,6 +130,7 @@ class Correction:
             "spoken_at": self.spoken_at,
             "triggered_at": self.triggered_at,
             "index": self.index,
+            "phrasing": self.phrasing,
         }
 
 
@@ -133,6 +143,9 @@ class Instructor:
     holdout: Holdout = NOTHING_HELD_OUT
     """What training never hears; with ``split``, the split whose episodes this instructor speaks in."""
     split: Split | None = None
+    max_words: int | None = None
+    """The most words the goal sentence may reach (the observation's L): a paraphrase is chosen only where
+    it leaves room for the grammar's longest correction wherever another may follow."""
     challenge: Kind | None = field(default=None, init=False)
     instruction_text: str = field(default="", init=False)
     corrections: list[Correction] = field(default_factory=list, init=False)
@@ -142,6 +155,9 @@ class Instructor:
     _delay: int = field(default=0, init=False)
     _trigger: tuple[int, int] | None = field(default=None, init=False)  # (step, touched object)
     _corrected: set[int] = field(default_factory=set, init=False)  # the wrong objects already corrected on
+    _rewording: np.random.Generator | None = field(default=None, init=False)
+    """The paraphrase split's own draws, spawned from the episode's stream without advancing it, so its
+    episodes and their control (the same seeds in the grammar) differ in the words alone."""
 
     def __post_init__(self) -> None:
         check_task(self.task)
@@ -181,6 +197,11 @@ class Instructor:
             )
         self._phrase = pick(rng, phrases)
         self.instruction_text = instruction(pick(rng, TASK_VERBS[self.task]), self._phrase)
+        if self.split is Split.PARAPHRASE:
+            self._rewording = rng.spawn(1)[0]
+            verbs = task_class(self.task).paraphrase_verbs
+            if verbs and self._rewording.random() < PARAPHRASE_VERB_RATE:
+                self.instruction_text = instruction(pick(self._rewording, verbs), self._phrase)
 
     def observe(self, rng: np.random.Generator, step: int, achieved: np.ndarray) -> bool:
         """Watch the state after ``step``; return True when the goal sentence changed at this step."""
@@ -205,9 +226,27 @@ class Instructor:
         return [int(i) for i in np.flatnonzero(achieved) if i != self._scene.goal_index and i not in self._corrected]
 
     def _speak(self, rng: np.random.Generator, step: int, triggered_at: int, touched: int) -> None:
-        self.corrections.append(self._correct(rng, step, triggered_at, touched))
+        spoken = self._correct(rng, step, triggered_at, touched)
+        if self._rewording is not None:
+            spoken = self._reworded(spoken, touched)
+        self.corrections.append(spoken)
         self._corrected.add(touched)
         self._trigger = None
+
+    def _reworded(self, spoken: Correction, touched: int) -> Correction:
+        """``spoken`` in a phrasing of the paraphrase split, meaning what it meant: it counts as its form."""
+        assert self._scene is not None and self.challenge is not None and self._phrase is not None
+        objects = self._scene.objects
+        considered = candidates(self.challenge, self._phrase, objects) - self._corrected
+        referents = Referents(
+            objects, self._scene.goal_index, touched, considered, lambda ps: self.holdout.correction_phrases(ps, None)
+        )
+        assert self._rewording is not None
+        later = self.settings.max_corrections - len(self.corrections) - 1  # corrections that may follow
+        longest = max_sentence_words(1) - max_sentence_words(0)
+        room = None if self.max_words is None else self.max_words - len(self.text.split()) - later * longest
+        reworded = paraphrase_correction(self._rewording, spoken.form, referents, room)
+        return spoken if reworded is None else replace(spoken, text=reworded[0], phrasing=reworded[1])
 
     @property
     def names_goal(self) -> bool:

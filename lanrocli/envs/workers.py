@@ -83,7 +83,7 @@ def _serve(connection: Connection, make_env: Callable[[], LanroEnv], parent: int
     except Exception:  # the parent re-raises it with the worker's traceback
         connection.send(("error", traceback.format_exc()))
         return
-    connection.send(("ok", (env.task.name, env.vocabulary, env.metadata, env.render_mode)))
+    connection.send(("ok", (env.task.name, env.vocabulary, env.metadata, env.render_mode, env.action_space)))
     calls: dict[str, Callable[[Any], Any]] = {
         "reset": lambda seed: env.reset(seed=seed),
         "step": env.step,
@@ -119,7 +119,7 @@ class EnvWorker:
     def wait_ready(self) -> EnvWorker:
         """Wait until the environment is built and take its description: separate from ``__init__`` so
         that several workers build theirs at once."""
-        task, self.vocabulary, self.metadata, self.render_mode = self._receive()
+        task, self.vocabulary, self.metadata, self.render_mode, self.action_space = self._receive()
         self.task = make_task(task)
         return self
 

@@ -83,6 +83,13 @@ class EvaluationReport:
             "without_negation": _rate([r for r in spoken if not r.negation]),
         }
 
+    def by_phrasing(self) -> dict[str, Rate]:
+        """Among episodes in which a correction was spoken, by the paraphrase it was spoken in (the
+        paraphrase split; ``grammar`` where no paraphrase fitted): what each phrasing costs."""
+        spoken = [r for r in self.results if r.corrected]
+        names = sorted({r.phrasing or "grammar" for r in spoken})
+        return {name: _rate([r for r in spoken if (r.phrasing or "grammar") == name]) for name in names}
+
     def attention_on_goal(self) -> dict[str, float | None] | None:
         """Per phase, the mean over all its steps of the share of the policy's attention on the goal object
         (None for a phase without steps); None when the policy had no attention to measure."""
@@ -94,6 +101,10 @@ class EvaluationReport:
             steps = sum(r.attention[phase][1] for r in self.results if phase in r.attention)
             means[phase] = total / steps if steps else None
         return means
+
+    @property
+    def _paraphrased(self) -> bool:
+        return any(r.phrasing for r in self.results)
 
     @property
     def mean_length(self) -> float:
@@ -135,6 +146,7 @@ class EvaluationReport:
                 str(i): self.rate(f"corrected_success_after_{i}").as_dict() for i in range(2, MAX_CORRECTIONS + 1)
             },
             "by_negation": {k: r.as_dict() for k, r in self.by_negation().items()},
+            **({"by_phrasing": {k: r.as_dict() for k, r in self.by_phrasing().items()}} if self._paraphrased else {}),
             ATTENTION: self.attention_on_goal(),
         }
 

@@ -60,6 +60,8 @@ class EpisodeResult:
     """Whether the first object the task's condition held for was the one the sentence names (the goal, or
     the object an ``other`` sentence names); False where it held for none. Success alone cannot tell an arm
     that read its sentence from one that moves on to the next object after a wrong one."""
+    phrasing: str | None = None
+    """The paraphrase the last correction was spoken in (the paraphrase split), None for the grammar's."""
 
     @property
     def corrected(self) -> bool:

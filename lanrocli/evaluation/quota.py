@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from lanrocli.core.choices import CorrectionForm
+from lanrocli.envs.settings import EnvSettings
 from lanrocli.evaluation.evaluate import EvaluationReport
 from lanrocli.evaluation.metrics import after_correction
 
@@ -48,3 +50,13 @@ CORRECTION_QUOTA = CorrectionQuota(spoken=300, negations=150, episodes=3000)
 
 QUOTA_TEST_EPISODES = 500
 """The ordinary test's size for which ``CORRECTION_QUOTA`` is written (the curricula's default)."""
+
+CORRECTION_TEST_NEGATION_RATE = 0.5
+"""Share of the correction test's spoken corrections that are negations, where the stage allows them."""
+
+
+def correction_changes(stage: EnvSettings) -> dict[str, Any]:
+    """The correction test's changes to a stage: every episode a correction episode, half the spoken
+    corrections negations where the stage allows them."""
+    negations = {"negation_rate": CORRECTION_TEST_NEGATION_RATE} if stage.negations else {}
+    return {"correction_rate": 1.0, **negations}

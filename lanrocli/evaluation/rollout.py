@@ -34,6 +34,10 @@ the observation), or None where it has none. Evaluation reads it without knowing
 module needs no torch; scripted policies have no such method."""
 
 
+class PolicyError(ValueError):
+    """A policy raised, or answered with something that is not an action, in a named episode and step."""
+
+
 class BatchPolicy(Protocol):
     """A policy that answers several observations at once: ``act_batch`` takes them stacked (``[B, ...]``
     per key) and returns the actions ``[B, A]`` and its attention over the object slots ``[B, slots]``, or
@@ -120,23 +124,66 @@ class Episode:
             attention={phase: (sum(values), len(values)) for phase, values in self.shares.items()},
             corrections=0 if correction is None else int(correction["index"]),
             named_first=bool(self.named_first),
+            phrasing=None if correction is None else correction.get("phrasing"),
         )
 
 
-def _decide(policies: Sequence[Policy], episodes: Sequence[Episode]) -> list[tuple[np.ndarray, np.ndarray | None]]:
+def _where(episode: Episode, first: int) -> str:
+    return f"episode {episode.seed - first} (seed {episode.seed}), step {episode.length}"
+
+
+def checked_action(action: Any, episode: Episode, first: int) -> np.ndarray:
+    """``action`` as the environment takes it, or a :class:`PolicyError` that names the episode and step:
+    the shape of the action space and finite numbers (the environment clips them to [-1, 1])."""
+    expected = episode.env.action_space.shape
+    try:
+        array = np.asarray(action, dtype=np.float32)
+    except (TypeError, ValueError) as error:
+        raise PolicyError(f"the policy's action in {_where(episode, first)} is not numbers: {error}") from None
+    if array.shape != expected:
+        raise PolicyError(
+            f"the policy's action in {_where(episode, first)} has shape {array.shape}; the task's actions have "
+            f"shape {expected}"
+        )
+    if not np.all(np.isfinite(array)):
+        raise PolicyError(f"the policy's action in {_where(episode, first)} is not finite: {array.tolist()}")
+    return array
+
+
+def _asked(call: Callable[[], Any], episode: Episode, first: int) -> Any:
+    """``call()``, its exception turned into a :class:`PolicyError` naming where it happened."""
+    try:
+        return call()
+    except PolicyError:
+        raise
+    except Exception as error:
+        raise PolicyError(f"the policy raised {type(error).__name__} in {_where(episode, first)}: {error}") from error
+
+
+def _decide(
+    policies: Sequence[Policy], episodes: Sequence[Episode], width: int, first: int
+) -> list[tuple[np.ndarray, np.ndarray | None]]:
     """Each episode's action and the policy's attention there: one batch for a :class:`BatchPolicy`, else
-    each episode asks its own policy."""
+    each episode asks its own policy. A batch is padded to ``width`` rows (the first repeated), so that a
+    network computes every batch at one size and an episode's actions do not depend on how many others
+    run beside it: side by side, in one process or spread over several, the numbers are the same."""
     act_batch = getattr(policies[0], "act_batch", None)
     if act_batch is not None:
         shown = [episode.shown for episode in episodes]
-        actions, weights = act_batch({key: np.stack([s[key] for s in shown]) for key in shown[0]})
-        return [(actions[i], None if weights is None else weights[i]) for i in range(len(episodes))]
+        rows = shown + [shown[0]] * (width - len(shown))
+        stacked = {key: np.stack([s[key] for s in rows]) for key in shown[0]}
+        actions, weights = _asked(lambda: act_batch(stacked), episodes[0], first)
+        return [
+            (checked_action(actions[i], episode, first), None if weights is None else weights[i])
+            for i, episode in enumerate(episodes)
+        ]
     decisions = []
     for policy, episode in zip(policies, episodes):
         attend: Attend | None = getattr(policy, "attention", None)
         shown = episode.shown
         weights = None if attend is None else attend(shown)
-        decisions.append((policy.act(shown, episode.info), weights))
+        action = _asked(lambda p=policy, s=shown, e=episode: p.act(s, e.info), episode, first)
+        decisions.append((checked_action(action, episode, first), weights))
     return decisions
 
 
@@ -158,10 +205,12 @@ def run_episodes(
     on_result: Callable[[EpisodeResult], bool],
     instruction_shown: Instruction = Instruction.TRUE,
     frames: Callable[[int], list[np.ndarray] | None] = lambda _: None,
+    origin: int | None = None,
 ) -> None:
     """Episodes ``first``, ``first + 1``, ... (at most ``episodes``), as many at a time as there are
     ``envs``; ``on_result`` gets each result in episode order and returns whether to go on. ``frames(i)``:
-    where episode ``i`` records its frames, if anywhere.
+    where episode ``i`` records its frames, if anywhere. ``origin``: the seed errors count episodes from
+    (default ``first``), where these episodes are a part of a longer run.
 
     A scripted policy keeps state within an episode, so each environment's episodes get a copy of it; a
     :class:`BatchPolicy` keeps none and answers all of them at once.
@@ -171,14 +220,17 @@ def run_episodes(
     running: dict[int, tuple[int, Episode]] = {}  # environment -> (episode index, episode)
     finished: dict[int, EpisodeResult] = {}
     started = reported = 0
+    origin = first if origin is None else origin
     while reported < episodes:
         for k in range(len(envs)):
             if k not in running and started < episodes:
-                policies[k].reset(seed=first + started)
+                reset = getattr(policies[k], "reset", None)
+                if reset is not None:
+                    reset(seed=first + started)
                 episode = Episode(envs[k], first + started, instruction_shown, frames(started))
                 running[k], started = (started, episode), started + 1
         slots = sorted(running)
-        decisions = _decide([policies[k] for k in slots], [running[k][1] for k in slots])
+        decisions = _decide([policies[k] for k in slots], [running[k][1] for k in slots], len(envs), origin)
         for k, (_, weights) in zip(slots, decisions):
             running[k][1].attend(weights)
         for k, outcome in zip(slots, _step([envs[k] for k in slots], [action for action, _ in decisions])):

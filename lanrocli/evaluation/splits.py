@@ -9,14 +9,17 @@ split's, which alone moves a drop by several points from seed to seed."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from lanrocli.core.choices import Split
+from lanrocli.core.choices import Kind, Split
 from lanrocli.core.stats import paired_rate_difference
+from lanrocli.envs.settings import EnvSettings
 from lanrocli.evaluation.metrics import FIGURE, EpisodeResult, entry
+from lanrocli.evaluation.quota import correction_changes
 
 
 @dataclass(frozen=True)
@@ -39,7 +42,7 @@ class SplitFigure:
         return None if node is None else dict(node)
 
 
-CONTROLLED: frozenset[Split] = frozenset({Split.CORRECTION_WORDS, Split.LATE_CORRECTIONS})
+CONTROLLED: frozenset[Split] = frozenset({Split.CORRECTION_WORDS, Split.LATE_CORRECTIONS, Split.PARAPHRASE})
 """The splits measured against a control. The pairs split changes the goal, so no episode of it can be
 played with nothing held out: the ordinary test, built like it, is its in-distribution figure. Common
 ground is judged on its own figure."""
@@ -57,9 +60,12 @@ SPLIT_FIGURES: tuple[SplitFigure, ...] = (
     SplitFigure(Split.CORRECTION_WORDS, "corrected", "corrected", "corrected_success"),
     SplitFigure(Split.LATE_CORRECTIONS, "corrected", "corrected", "corrected_success"),
     SplitFigure(Split.COMMON_GROUND, "common_ground", "corrected, common ground", "corrected_success_common_ground"),
+    SplitFigure(Split.PARAPHRASE, "success", "success", "success"),
+    SplitFigure(Split.PARAPHRASE, "corrected", "corrected", "corrected_success"),
 )
 """What each split is judged on: the pairs split changes the goal of every episode, so success and the
-corrected success; the others change what a correction episode says or when, so the corrected success."""
+corrected success; the paraphrase split rewords some instructions too, so both as well; the others change
+what a correction episode says or when, so the corrected success."""
 
 
 def in_distribution(
@@ -70,6 +76,25 @@ def in_distribution(
     if CONTROL in split_record:
         return figure.read(split_record[CONTROL]), "control"
     return (figure.read(test) if test is not None else None), "test"
+
+
+def split_changes(split: Split) -> Callable[[EnvSettings], dict[str, Any]]:
+    """A split's changes to the last stage: the pairs split keeps the stage as it is (its goal alone
+    differs); the others make every episode a correction episode, of the common-ground kind for that split,
+    so that the thing held out is heard in every episode where the agent errs (the paraphrase split's
+    negations as often as the correction test's, and one correction an episode, so that every phrasing
+    fits the sentence)."""
+
+    def changes(stage: EnvSettings) -> dict[str, Any]:
+        if split is Split.PAIRS:
+            return {}
+        if split is Split.COMMON_GROUND:
+            return {"correction_rate": 1.0, "kinds": (Kind.COMMON_GROUND,)}
+        if split is Split.PARAPHRASE:  # one correction: a long phrasing leaves no room for a second
+            return {**correction_changes(stage), "max_corrections": 1}
+        return {"correction_rate": 1.0}
+
+    return changes
 
 
 def paired_drops(split: Split, held: list[EpisodeResult], control: list[EpisodeResult]) -> dict[str, Any]:
@@ -127,7 +152,8 @@ def split_lines(splits: dict[str, dict[str, dict[str, Any]]], ordinary: dict[str
 
 
 def control_lines(split: Split, record: dict[str, Any]) -> list[str]:
-    """What ``lanro eval --split`` says under its table: each figure of the split against its control."""
+    """What ``lanro eval --split`` says under its table: each figure of the split against its control, and
+    the corrected success of each phrasing where the split paraphrases."""
     lines = []
     for figure in SPLIT_FIGURES:
         if figure.split is split and CONTROL in record:
@@ -136,6 +162,8 @@ def control_lines(split: Split, record: dict[str, Any]) -> list[str]:
                 f"{figure.label}: {with_interval(mine)} here, {with_interval(theirs)} on the control (the same "
                 f"episodes with nothing held out): drop {_points(figure, record, mine, theirs)} points"
             )
+    for name, rate in record.get("by_phrasing", {}).items():
+        lines.append(f"corrected, spoken as {name!r}: {with_interval(rate)}")
     return lines
 
 

@@ -54,12 +54,15 @@ class Holdout:
     ``late_corrections`` split's corrections; a curriculum checks they start after every stage's
     ``max_delay``. ``common_ground``: rare colour words never heard in training, at most one per colour,
     so each colour keeps a rare word to train on; the ``common_ground`` split's instructions use them.
+    ``paraphrase``: whether a run tests on the ``paraphrase`` split, whose phrasings the grammar never
+    speaks (:mod:`lanrocli.language.paraphrase`), so that training holds them out whatever this says.
     """
 
     pairs: tuple[ObjectProps, ...] = ()
     correction_words: tuple[str, ...] = ()
     late_corrections: tuple[int, int] | None = None
     common_ground: tuple[str, ...] = ()
+    paraphrase: bool = False
 
     def __post_init__(self) -> None:
         pairs = tuple(parse_pair(p) if isinstance(p, str) else p for p in self.pairs)
@@ -109,11 +112,14 @@ class Holdout:
             Split.CORRECTION_WORDS: bool(self.correction_words),
             Split.LATE_CORRECTIONS: self.late_corrections is not None,
             Split.COMMON_GROUND: bool(self.common_ground),
+            Split.PARAPHRASE: self.paraphrase,
         }
         return tuple(split for split in Split if held[split])
 
     def check_split(self, split: Split | None) -> None:
-        if split is not None and split not in self.splits:
+        """Refuse a split this holdout kept nothing out for; the paraphrase split is always there, since no
+        run ever heard its phrasings."""
+        if split is not None and split is not Split.PARAPHRASE and split not in self.splits:
             raise ValueError(
                 f"split {split.value!r} needs the holdout to hold something out for it; it holds {self.describe()}"
             )
@@ -160,7 +166,9 @@ class Holdout:
         parts = []
         for split in self.splits:
             value = data[split.value]
-            if split is Split.LATE_CORRECTIONS:
+            if split is Split.PARAPHRASE:
+                parts.append(split.value)
+            elif split is Split.LATE_CORRECTIONS:
                 parts.append(f"{split.value}: delays {value[0]} to {value[1]}")
             else:
                 parts.append(f"{split.value}: {', '.join(value)}")
@@ -172,6 +180,7 @@ class Holdout:
             "correction_words": list(self.correction_words),
             "late_corrections": None if self.late_corrections is None else list(self.late_corrections),
             "common_ground": list(self.common_ground),
+            "paraphrase": self.paraphrase,
         }
 
     @classmethod
@@ -183,6 +192,7 @@ class Holdout:
             tuple(data.get("correction_words", ())),
             None if late is None else (int(late[0]), int(late[1])),
             tuple(data.get("common_ground", ())),
+            bool(data.get("paraphrase", False)),
         )
 
 

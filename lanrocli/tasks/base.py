@@ -90,6 +90,9 @@ class TaskDefinition:
     gym_id: ClassVar[str]
     verbs: ClassVar[tuple[str, ...]]
     """The words the instructor may use for the task; the first is the one hints show."""
+    paraphrase_verbs: ClassVar[tuple[str, ...]] = ()
+    """Other words for the task that training never speaks: the paraphrase split's instructions use them
+    (:mod:`lanrocli.language.paraphrase`). A task without any keeps its own verbs there."""
     gripper: ClassVar[bool] = False
     """Whether the arm uses its fingers: the action gains a fourth number, the finger opening."""
     threshold_range: ClassVar[tuple[float, float] | None] = None

@@ -32,6 +32,7 @@ class Grasp(TaskDefinition):
     name = "grasp"
     gym_id = "lanro/Grasp-v0"
     verbs = ("grasp", "grip", "grab")
+    paraphrase_verbs = ("seize", "clutch")
     gripper = True
 
     def achieved(self, view: TaskView) -> np.ndarray:

@@ -17,6 +17,7 @@ class Lift(Grasp):
     name = "lift"
     gym_id = "lanro/Lift-v0"
     verbs = ("lift", "raise", "hoist")
+    paraphrase_verbs = ("elevate", "heave")
     threshold_range = LIFT_HEIGHT
 
     def achieved(self, view: TaskView) -> np.ndarray:

@@ -22,6 +22,7 @@ class Push(TaskDefinition):
     name = "push"
     gym_id = "lanro/Push-v0"
     verbs = ("push", "move", "shift")
+    paraphrase_verbs = ("shove", "nudge")
     threshold_range = PUSH_DISTANCE
 
     def achieved(self, view: TaskView) -> np.ndarray:

@@ -25,6 +25,7 @@ class Reach(TaskDefinition):
     name = "reach"
     gym_id = "lanro/Reach-v0"
     verbs = ("reach", "touch", "contact")
+    paraphrase_verbs = ("tap", "approach")
 
     def achieved(self, view: TaskView) -> np.ndarray:
         touch = view.left_finger | view.right_finger

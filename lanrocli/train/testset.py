@@ -21,21 +21,18 @@ from typing import Any
 import torch
 
 from lanrocli.agent.policy import AgentPolicy
-from lanrocli.core.choices import ActingAttention, Instruction, Kind, Split
+from lanrocli.core.choices import ActingAttention, Instruction, Split
 from lanrocli.core.seeds import correction_test_seed, held_out_seed, split_test_seed
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.workers import make_envs
 from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
-from lanrocli.evaluation.quota import CORRECTION_QUOTA, CorrectionQuota
-from lanrocli.evaluation.splits import CONTROL, CONTROLLED, DROP, paired_drops
+from lanrocli.evaluation.quota import CORRECTION_QUOTA, CorrectionQuota, correction_changes
+from lanrocli.evaluation.splits import CONTROL, CONTROLLED, DROP, paired_drops, split_changes
 from lanrocli.language.vocabulary import unlearned_words
 from lanrocli.train.checkpoint import resolve_checkpoint
 from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, SPLITS
 from lanrocli.train.trainer import TrainSettings, load_policy
-
-CORRECTION_TEST_NEGATION_RATE = 0.5
-"""Share of the correction test's spoken corrections that are negations, where the stage allows them."""
 
 
 @dataclass(frozen=True)
@@ -162,14 +159,8 @@ def measure(
 
 
 def _correction_settings(overrides: Mapping[str, Any]) -> Callable[[EnvSettings], dict[str, Any]]:
-    """The correction test's changes to a stage: every episode a correction episode, half the spoken
-    corrections negations where the stage allows them; ``overrides`` change them in turn."""
-
-    def changes(stage: EnvSettings) -> dict[str, Any]:
-        negations = {"negation_rate": CORRECTION_TEST_NEGATION_RATE} if stage.negations else {}
-        return {"correction_rate": 1.0, **negations, **overrides}
-
-    return changes
+    """The correction test's changes to a stage (:func:`correction_changes`), changed by ``overrides``."""
+    return lambda stage: {**correction_changes(stage), **overrides}
 
 
 def correction_test(
@@ -199,21 +190,6 @@ def correction_test(
         "quota_met": quota.met(report, negations, chains),
     }
     return Measurement(loaded.settings, loaded.env, first, True, report, record)
-
-
-def split_changes(split: Split) -> Callable[[EnvSettings], dict[str, Any]]:
-    """A split's changes to the last stage: the pairs split keeps the stage as it is (its goal alone
-    differs); the others make every episode a correction episode, of the common-ground kind for that split,
-    so that the thing held out is heard in every episode where the agent errs."""
-
-    def changes(stage: EnvSettings) -> dict[str, Any]:
-        if split is Split.PAIRS:
-            return {}
-        if split is Split.COMMON_GROUND:
-            return {"correction_rate": 1.0, "kinds": (Kind.COMMON_GROUND,)}
-        return {"correction_rate": 1.0}
-
-    return changes
 
 
 def split_test(

@@ -134,6 +134,17 @@ def test_table_output() -> None:
     assert result.exit_code == 0 and "lift: 3 sampled sentences" in result.output
 
 
+def test_a_split_shows_what_the_instructor_says_in_its_episodes() -> None:
+    result = runner.invoke(
+        app, ["sample-instructions", "--task", "push", "--split", "paraphrase", "--n", "6", "--json"]
+    )
+    assert result.exit_code == 0, result.output
+    spoken = json.loads(result.output)
+    assert len(spoken) == 6 and all(s["phrasing"] for s in spoken)
+    refused = runner.invoke(app, ["sample-instructions", "--split", "paraphrase", "--corrections"])
+    assert refused.exit_code == 2 and "--split" in refused.output
+
+
 def test_all_enumerates_every_instruction() -> None:
     result = runner.invoke(app, ["sample-instructions", "--all", "--task", "grasp"])
     lines = result.output.strip().splitlines()

@@ -243,3 +243,20 @@ def test_named_first_tells_an_arm_that_reads_from_one_that_moves_on(env: LanroEn
     finally:
         corrected.close()
     assert moved_on.overall.successes >= 4 and moved_on.named_first.successes == 0
+
+
+def test_paraphrased_corrections_are_counted_by_phrasing() -> None:
+    plain = EvaluationReport([episode(True, "ambiguity", EXCUSE)])
+    assert "by_phrasing" not in plain.as_dict()
+    results = [
+        EpisodeResult(True, 10, Kind.AMBIGUITY, EXCUSE, -9.0, phrasing="i said"),
+        EpisodeResult(False, 10, Kind.AMBIGUITY, NEGATION, -9.0, phrasing="the other"),
+        EpisodeResult(True, 10, Kind.AMBIGUITY, EDIT, -9.0),  # no paraphrase fitted: the grammar's words
+        EpisodeResult(True, 10, Kind.AMBIGUITY, None, -9.0),  # no correction spoken: not counted
+    ]
+    by_phrasing = EvaluationReport(results).as_dict()["by_phrasing"]
+    assert {name: (r["episodes"], r["success"]) for name, r in by_phrasing.items()} == {
+        "grammar": (1, 1.0),
+        "i said": (1, 1.0),
+        "the other": (1, 0.0),
+    }

@@ -34,7 +34,7 @@ PAIRS = next(f for f in SPLIT_FIGURES if f.split is Split.PAIRS and f.name == "c
 
 
 def test_only_splits_that_change_the_correction_alone_have_a_control() -> None:
-    assert {Split.CORRECTION_WORDS, Split.LATE_CORRECTIONS} == CONTROLLED
+    assert {Split.CORRECTION_WORDS, Split.LATE_CORRECTIONS, Split.PARAPHRASE} == CONTROLLED
 
 
 def test_the_drop_of_a_controlled_split_is_taken_from_its_control() -> None:

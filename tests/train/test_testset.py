@@ -15,14 +15,13 @@ from lanrocli.core.seeds import correction_test_seed, held_out_seed
 from lanrocli.envs.policies import arm_view
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.evaluation.metrics import ATTENTION, PHASES, PLAIN
-from lanrocli.evaluation.quota import CorrectionQuota
+from lanrocli.evaluation.quota import CORRECTION_TEST_NEGATION_RATE, CorrectionQuota
 from lanrocli.language import Vocabulary
 from lanrocli.language import vocabulary as vocabulary_module
 from lanrocli.tasks import OracleMemory, make_task
 from lanrocli.train import testset as testset_module
 from lanrocli.train.checkpoint import load_checkpoint, save_checkpoint
 from lanrocli.train.testset import (
-    CORRECTION_TEST_NEGATION_RATE,
     _load,
     _run,
     correction_test,

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 from collections.abc import Callable
 from enum import StrEnum
 from pathlib import Path
@@ -19,6 +20,7 @@ from lanrocli.cli.arguments import device_option, env_changes, err_console, fail
 from lanrocli.cli.display.commands import env_summary, print_evaluation
 from lanrocli.core.choices import ActingAttention, Instruction, Split
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.evaluation.protocols import PROTOCOLS
 from lanrocli.tasks import Task
 
 if TYPE_CHECKING:
@@ -38,8 +40,10 @@ def evaluate_command(
         str,
         typer.Argument(
             metavar="POLICY_OR_CHECKPOINT",
-            help="A scripted policy (oracle, mistaken, random), or a trained agent: a checkpoint directory, a "
-            "pointer such as RUN/stage-2-corrections/best, or a run folder (its latest checkpoint).",
+            help="A scripted policy (oracle, mistaken, random); a trained agent: a checkpoint directory, a "
+            "pointer such as RUN/stage-2-corrections/best, or a run folder (its latest checkpoint); or your own "
+            "policy: package.module:make_policy or path/to/file.py:make_policy, a function that takes the task's "
+            "name and returns a policy (docs/benchmark.md), scored on --protocol.",
         ),
     ],
     task: Annotated[Task | None, typer.Option(help="Task (scripted policies; default reach).")] = None,
@@ -102,6 +106,22 @@ def evaluate_command(
             "of the objects (soft) or the one object it attends to most (argmax). Default: the agent's own rule.",
         ),
     ] = None,
+    protocol: Annotated[
+        str | None,
+        typer.Option(
+            help="Score on a benchmark protocol, the same episodes for every policy (docs/benchmark.md): "
+            + ", ".join(PROTOCOLS)
+            + ". Default for your own policy: test.",
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(min=1, help="With --protocol: processes that share the episodes (default: the machine's cores)."),
+    ] = None,
+    address: Annotated[
+        str | None,
+        typer.Option(help="With --protocol: the Ray cluster that plays the episodes (auto, or ray://HOST:PORT)."),
+    ] = None,
     **env_options: Any,
 ) -> None:
     """Evaluate a scripted policy or a trained agent, overall and per kind and form of correction.
@@ -114,6 +134,17 @@ def evaluate_command(
     from lanrocli.evaluation.evaluate import evaluate
 
     changes = env_changes(env_options)
+    if protocol is not None or ":" in what:
+        others = correction_test or split or seed is not None or instruction is not Instruction.TRUE or gif or changes
+        if others or second_corrections is not None or acting_attention is not None:
+            raise fail(
+                "a benchmark protocol fixes its episodes, sentences and settings; leave out --correction-test, "
+                "--split, --seed, --instruction, --gif, --acting-attention and the environment options"
+            )
+        _score(what, task, protocol or "test", episodes, device, workers, address, as_json)
+        return
+    if workers is not None or address is not None:
+        raise fail("--workers and --address share a benchmark protocol's episodes; add --protocol")
     if correction_test and (seed is not None or instruction is not Instruction.TRUE or gif is not None):
         raise fail(
             "--correction-test runs episodes of its own, as the sentence the instructor speaks; leave out "
@@ -212,6 +243,66 @@ def evaluate_command(
             Console().print(line, highlight=False, soft_wrap=True)
     if gif:
         Console().print(f"wrote {gif}")
+
+
+def _score(
+    what: str,
+    task: Task | None,
+    protocol: str,
+    episodes: int | None,
+    device: str | None,
+    workers: int | None,
+    address: str | None,
+    as_json: bool,
+) -> None:
+    """``lanro eval ... --protocol``: a scripted policy, a trained agent or your own, on a benchmark protocol."""
+    from lanrocli.evaluation.benchmark import score
+    from lanrocli.evaluation.protocols import PROTOCOL_VERSION
+    from lanrocli.evaluation.rollout import PolicyError
+
+    if protocol not in PROTOCOLS:
+        raise fail(f"unknown protocol {protocol!r}: choose one of {', '.join(PROTOCOLS)}")
+    policy: Any
+    if ":" in what:
+        if task is None:
+            raise fail(f"{what} makes a policy for a task: add --task (one of {', '.join(t.value for t in Task)})")
+        policy, task_name = what, task.value
+    elif what in {p.value for p in PolicyName}:
+        from lanrocli.envs.policies import make_policy
+
+        task_name = (task or Task.REACH).value
+        policy = make_policy(what, task_name)
+    else:
+        from lanrocli.train.trainer import load_policy, pick_device
+
+        path = _trained_agent(what)
+        if not path.exists():
+            raise fail(f"{path} is neither a policy nor an existing checkpoint path")
+        try:
+            settings, policy = load_policy(path, pick_device(device))
+        except (ValueError, KeyError) as error:
+            raise fail(f"cannot load a trained agent from {path}: {error}") from None
+        if task is not None and task != settings.task:
+            raise fail(f"{path} was trained on {settings.task}; it cannot be scored on {task}")
+        task_name = settings.task
+    count = workers or os.cpu_count() or 1
+    try:
+        report, record = score(
+            policy, task_name, protocol, episodes=episodes, workers=count, address=address, label=what
+        )
+    except PolicyError as error:
+        raise fail(f"{what}: {error}") from None
+    except ValueError as error:
+        raise fail(str(error)) from None
+    if as_json:
+        typer.echo(json.dumps(record))
+        return
+    print_evaluation(report, f"{what} on {task_name}, protocol {protocol} (version {PROTOCOL_VERSION})")
+    if "split" in record:
+        from lanrocli.evaluation.splits import control_lines
+
+        for line in control_lines(Split(protocol), record):
+            Console().print(line, highlight=False, soft_wrap=True)
 
 
 Check = Callable[["TrainSettings", EnvSettings], None]

@@ -10,6 +10,7 @@ import numpy as np
 import typer
 
 from lanrocli.cli.display.commands import print_grammar_stats, print_sampled, write_sentences_json
+from lanrocli.core.choices import Split
 from lanrocli.language import all_sentences, grammar_vocabulary, sample_sentence, sentence_stats
 from lanrocli.tasks import Task
 
@@ -32,8 +33,24 @@ def sample_instructions(
     stats: Annotated[
         bool, typer.Option("--stats", help="Print counts (distinct sentences, vocabulary size, L, per form) only.")
     ] = False,
+    split: Annotated[
+        Split | None,
+        typer.Option(
+            help="What the instructor says in N episodes of a generalisation split (paraphrase: phrasings training "
+            "never hears) of the task's curriculum, the arm acting on a wrong object first so that it corrects.",
+        ),
+    ] = None,
 ) -> None:
     """Show sentences the instructor can speak: sampled, or all of them."""
+    if split is not None:
+        if corrections or negations or rare or enumerate_all or stats:
+            raise typer.BadParameter(
+                "a split's episodes set their own sentences; leave out --corrections, --negations, --rare, --all "
+                "and --stats",
+                param_hint="--split",
+            )
+        _split_sentences(task, split, n, seed, as_json)
+        return
     if negations and not corrections:
         raise typer.BadParameter("--negations only affects corrections; add --corrections", param_hint="--negations")
     if enumerate_all:
@@ -64,3 +81,33 @@ def sample_instructions(
             typer.echo(s.text)
     else:
         print_sampled(sentences, vocab, f"{task.value}: {n} sampled sentences (seed {seed})")
+
+
+def _split_sentences(task: Task, split: Split, n: int, seed: int, as_json: bool) -> None:
+    """The last sentence of ``n`` episodes of ``split``, episode i reset with seed ``seed + i``, played by
+    the scripted policy that first does the task on a wrong object."""
+    from lanrocli.envs.policies import make_policy
+    from lanrocli.evaluation.benchmark import protocol_env
+    from lanrocli.evaluation.protocols import PROTOCOLS
+
+    env = protocol_env(task.value, PROTOCOLS[split.value])()
+    policy = make_policy("mistaken", task.value)
+    spoken = []
+    try:
+        for episode in range(n):
+            observation, info = env.reset(seed=seed + episode)
+            policy.reset(seed=seed + episode)
+            done = False
+            while not done:
+                observation, _, terminated, truncated, info = env.step(policy.act(observation, info))
+                done = terminated or truncated
+            correction = info["correction"]
+            spoken.append({"text": info["instruction_text"], "phrasing": correction and correction["phrasing"]})
+    finally:
+        env.close()
+    if as_json:
+        typer.echo(json.dumps(spoken))
+        return
+    for sentence in spoken:
+        phrasing = f"  [{sentence['phrasing']}]" if sentence["phrasing"] else ""
+        typer.echo(f"{sentence['text']}{phrasing}")
