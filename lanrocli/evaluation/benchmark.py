@@ -20,6 +20,7 @@ import functools
 import importlib
 import importlib.util
 import multiprocessing
+import os
 import pickle
 import sys
 from collections import deque
@@ -34,6 +35,7 @@ import numpy as np
 from lanrocli.config.curriculum import load_curriculum, packaged_curricula
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.envs.workers import exit_with_parent
 from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport
 from lanrocli.evaluation.metrics import EpisodeResult
 from lanrocli.evaluation.protocols import PROTOCOL_VERSION, TEST_EPISODES, Protocol, find_protocol, first_seed
@@ -204,7 +206,10 @@ def _executor(workers: int, address: str | None) -> tuple[Callable[..., Any], Ca
         return lambda _, *args: _RayFuture(remote.remote(*args)), lambda: None
     if workers == 1:
         return _Later, lambda: None
-    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+    # spawn, not fork: the workers run torch, whose thread pools do not survive a fork; each ends with this
+    # process however it ends, so a killed scoring leaves nothing running
+    context = multiprocessing.get_context("spawn")
+    pool = ProcessPoolExecutor(workers, mp_context=context, initializer=exit_with_parent, initargs=(os.getpid(),))
     return pool.submit, lambda: pool.shutdown(wait=False, cancel_futures=True)
 
 

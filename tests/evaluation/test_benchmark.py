@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -127,3 +128,40 @@ def test_a_policy_that_does_not_pickle_is_refused_for_several_workers() -> None:
 
     with pytest.raises(ValueError, match="does not pickle"):
         lanrocli.evaluate(Local(), "reach", episodes=2, workers=2)
+
+
+def children(pid: int) -> set[int]:
+    found = subprocess.run(["pgrep", "-P", str(pid)], capture_output=True, text=True).stdout.split()
+    return {int(child) for child in found}
+
+
+def read(path: str) -> str:
+    try:
+        return Path(path).read_text(errors="ignore")
+    except OSError:  # the process ended meanwhile
+        return ""
+
+
+def alive(pid: int) -> bool:
+    """Running, not ended nor a zombie left to whoever adopted it."""
+    stat = read(f"/proc/{pid}/stat")
+    return bool(stat) and stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def test_a_killed_scoring_leaves_no_worker_behind(tmp_path: Path) -> None:
+    command = "from lanrocli.cli.app import app; app()"
+    args = ["eval", "random", "--task", "reach", "--protocol", "test", "--workers", "2"]
+    scoring = subprocess.Popen([sys.executable, "-c", command, *args], cwd=tmp_path, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    workers: set[int] = set()
+    while time.monotonic() < deadline and len(workers) < 2:
+        time.sleep(0.5)
+        workers = {w for child in children(scoring.pid) for w in children(child) | {child}}
+        workers = {w for w in workers if "spawn_main" in read(f"/proc/{w}/cmdline")}
+    assert len(workers) >= 2, "the workers never started"
+    scoring.kill()
+    scoring.wait()
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and any(alive(w) for w in workers):
+        time.sleep(0.5)
+    assert not any(alive(w) for w in workers)
