@@ -52,8 +52,8 @@ def _stage_lines(curriculum: Curriculum, state: RunState) -> list[str]:
         "## Stages",
         "",
         "| stage | rule | steps | ended | evaluations | rule's value at the end | wall time | steps/s collecting "
-        "| updates/s | steps/s evaluating | tests |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| updates/s | steps/s evaluating | tests | time: collecting / updating / evaluating / tests / rest |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for result in state.results:
         stage = curriculum.stages[result.index]
@@ -65,7 +65,8 @@ def _stage_lines(curriculum: Curriculum, state: RunState) -> list[str]:
         lines.append(
             f"| {result.index + 1}. {result.name} | {rule} | {result.end - result.start:,} of "
             f"{stage.budget.steps:,} | {result.ended} | {result.evaluations} | {_percent(result.rule_value)} | "
-            f"{result.wall_time / 60:.1f} min | {_speeds(state.rates(result), result.test_seconds)} |"
+            f"{result.wall_time / 60:.1f} min | {_speeds(state.rates(result), result.test_seconds)} | "
+            f"{_shares(state.shares(result))} |"
         )
     total = state.results[-1].end if state.results else 0
     status = FINISHED if state.finished else "running"
@@ -78,6 +79,11 @@ def _speeds(rates: dict[str, float | None] | None, test_seconds: float | None) -
     """The stage's rate in each phase and its tests' minutes, as table cells ("-" where not known)."""
     cells = [f"{rates[phase]:,.0f}" if rates and rates.get(phase) is not None else "-" for phase in RATES]
     return " | ".join([*cells, "-" if test_seconds is None else f"{test_seconds / 60:.1f} min"])
+
+
+def _shares(shares: dict[str, float] | None) -> str:
+    """A stage's time by phase as ``41 / 39 / 4 / 14 / 2 %``, or "-" where it is not known."""
+    return "-" if shares is None else " / ".join(f"{100 * share:.0f}" for share in shares.values()) + " %"
 
 
 def run_ended(out: Path) -> bool:
