@@ -116,16 +116,21 @@ def load_factory(spec: str) -> Callable[[str], Any]:
 
 @dataclass(frozen=True)
 class PolicySource:
-    """What a worker builds its policy from: the policy itself (pickled to it), or a factory's ``spec``
-    that each worker imports and calls for ``task``."""
+    """What a worker builds its policy from: the policy itself (in this process), its pickle, or a
+    factory's ``spec`` that each worker imports and calls for ``task``. A policy goes to other processes as
+    bytes of the standard pickle: handed to them as an object, its tensors would travel as handles to this
+    process's shared memory, which a worker may open only after this process has let them go."""
 
     policy: Any = None
+    pickled: bytes | None = None
     spec: str | None = None
     task: str | None = None
 
     def build(self) -> Any:
         if self.spec is not None:
             return as_policy(load_factory(self.spec)(self.task))
+        if self.pickled is not None:
+            return as_policy(pickle.loads(self.pickled))
         return as_policy(self.policy)
 
 
@@ -300,7 +305,7 @@ def score(
         source = PolicySource(policy=policy)
         if workers > 1 or address is not None:
             try:
-                pickle.dumps(policy)
+                source = PolicySource(pickled=pickle.dumps(policy))
             except Exception as error:
                 raise ValueError(
                     f"several workers each need a copy of the policy, and {_label(policy)} does not pickle "
