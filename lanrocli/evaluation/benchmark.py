@@ -1,9 +1,9 @@
 """Score any policy on a benchmark protocol (:mod:`lanrocli.evaluation.protocols`): ``lanrocli.evaluate``.
 
 A policy is whatever answers an observation with an action, in one of four shapes, tried in this order:
-an object with ``act_batch(observations) -> (actions, attention or None)`` (lanro's agents), a
-stable-baselines3 model (anything with ``predict(observation, deterministic=True)``), an object with
-``act(observation, info)`` and optionally ``reset(seed)`` (lanro's scripted policies), or a plain function
+an object with ``act_batch(observations) -> (actions, attention or None)`` (lanro's agents), one with
+``act(observation, info)`` and optionally ``reset(seed)`` (lanro's scripted policies), a stable-baselines3
+model or policy (anything with ``predict(observation, deterministic=True)``), or a plain function
 ``f(observation, info) -> action``. ``info`` is the environment's: the episode's sentence as text
 (``instruction_text``), the objects, the correction spoken; the observation holds the sentence as token ids.
 
