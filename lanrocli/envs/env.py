@@ -203,8 +203,8 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.instructor.start(rng, scene, challenge)
         if self.settings.mistake_start > 0.0 and rng.random() < self.settings.mistake_start:
             self._act_on_a_wrong_object(rng)
-        if self.settings.unknown_words > 0:  # drawn only then, so that other runs' episodes stay as they were
-            self._unread = rng.random(self.vocabulary.max_length) < self.settings.unknown_words
+        if self.settings.word_dropout > 0:  # drawn only then, so that other runs' episodes stay as they were
+            self._unread = rng.random(self.vocabulary.max_length) < self.settings.word_dropout
         self._tokens = self._read(self.instructor.text)
         self._steps = 0
         self._achieved = self._evaluate()
@@ -213,7 +213,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
 
     def _read(self, text: str) -> np.ndarray:
         """The sentence as the agent observes it: its words' ids, those at the places the episode drew
-        (``unknown_words``) read as ``<unk>``, the same places all episode, so a word does not flicker."""
+        (``word_dropout``) read as ``<unk>``, the same places all episode, so a word does not flicker."""
         tokens = self.vocabulary.encode(text)
         return np.where(self._unread & (tokens != PAD_ID), UNK_ID, tokens)
 

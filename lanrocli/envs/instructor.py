@@ -34,8 +34,7 @@ from lanrocli.language import (
 )
 from lanrocli.language.dialogue import candidates, naming_phrases, negation_phrases, opening_phrases
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
-from lanrocli.language.paraphrase import Scene as Referents
-from lanrocli.language.paraphrase import paraphrase_correction
+from lanrocli.language.paraphrase import Referents, paraphrase_correction
 from lanrocli.tasks import task_class
 
 MAX_DELAY = 20

@@ -99,6 +99,7 @@ def load_factory(spec: str) -> Callable[[str], Any]:
             loader = importlib.util.spec_from_file_location(path.stem, path)
             assert loader is not None and loader.loader is not None
             module = importlib.util.module_from_spec(loader)
+            sys.modules[loader.name] = module  # as an import would: dataclasses and pickles look it up there
             loader.loader.exec_module(module)
         else:
             if "" not in sys.path:  # a module beside the command line's folder, as `python -m` finds it
@@ -144,15 +145,28 @@ def protocol_env(task: str, chosen: Protocol, vocabulary: Vocabulary | None = No
         raise ValueError(f"the benchmark plays the tasks with a curriculum of their name ({tasks}), not {task!r}")
     curriculum = load_curriculum(packaged[task])
     stage = curriculum.stages[-1].env.settings().for_evaluation()
+    grammar = grammar_vocabulary(curriculum.max_corrections)
+    if vocabulary is not None and vocabulary.max_length != grammar.max_length:
+        # the sentence's length decides which paraphrases fit, so every policy must read the same one
+        raise ValueError(
+            f"the benchmark's sentences have {grammar.max_length} words at most, and this agent reads "
+            f"{vocabulary.max_length}: score an agent trained on {task}'s curriculum (its max_corrections)"
+        )
     return functools.partial(
         LanroEnv,
         curriculum.task,
         stage.replace(**chosen.changes(stage)),
         object_slots=curriculum.max_objects,
-        vocabulary=vocabulary or grammar_vocabulary(curriculum.max_corrections),
+        vocabulary=vocabulary or grammar,
         holdout=curriculum.holdout.settings(),
         split=chosen.split,
     )
+
+
+@functools.lru_cache(maxsize=1)
+def _built(pickled: bytes | None, spec: str | None, task: str | None) -> Any:
+    """A worker's policy, built once per process from its pickle or spec: it plays many blocks with it."""
+    return PolicySource(pickled=pickled, spec=spec, task=task).build()
 
 
 def _play(
@@ -160,12 +174,13 @@ def _play(
 ) -> list[EpisodeResult]:
     """Episodes ``first`` to ``first + count - 1`` of a protocol, played side by side in this process."""
     chosen = find_protocol(protocol_name)
+    policy = as_policy(source.policy) if source.policy is not None else _built(source.pickled, source.spec, source.task)
+    if "torch" in sys.modules:  # the workers share the cores: one thread each, as training's workers
+        sys.modules["torch"].set_num_threads(1)
     envs = [make_env() for _ in range(SIDE_BY_SIDE)]
     results: list[EpisodeResult] = []
     try:
-        run_episodes(
-            envs, source.build(), count, first, lambda r: results.append(r) is None, chosen.instruction, origin=origin
-        )
+        run_episodes(envs, policy, count, first, lambda r: results.append(r) is None, chosen.instruction, origin=origin)
     finally:
         for env in envs:
             env.close()
@@ -200,22 +215,23 @@ class _RayFuture:
         ray.cancel(self.reference)
 
 
-def _executor(workers: int, address: str | None) -> tuple[Callable[..., Any], Callable[[], None]]:
-    """A ``submit(function, *args) -> future`` for ``workers`` processes here, or Ray at ``address``, and
-    the call that ends it."""
+def _executor(workers: int, address: str | None) -> tuple[Callable[..., Any], Callable[[], None], int]:
+    """A ``submit(function, *args) -> future`` for ``workers`` processes here, or Ray at ``address``; the
+    call that ends it; and how many blocks run at once (on Ray, at least the cluster's CPUs)."""
     if address is not None:
         import ray
 
         ray.init(address=address, ignore_reinit_error=True, log_to_driver=False)
         remote = ray.remote(_play)
-        return lambda _, *args: _RayFuture(remote.remote(*args)), lambda: None
+        width = max(workers, int(ray.cluster_resources().get("CPU", 1)))
+        return lambda _, *args: _RayFuture(remote.remote(*args)), lambda: None, width
     if workers == 1:
-        return _Later, lambda: None
+        return _Later, lambda: None, 1
     # spawn, not fork: the workers run torch, whose thread pools do not survive a fork; each ends with this
     # process however it ends, so a killed scoring leaves nothing running
     context = multiprocessing.get_context("spawn")
     pool = ProcessPoolExecutor(workers, mp_context=context, initializer=exit_with_parent, initargs=(os.getpid(),))
-    return pool.submit, lambda: pool.shutdown(wait=False, cancel_futures=True)
+    return pool.submit, lambda: pool.shutdown(wait=False, cancel_futures=True), workers
 
 
 def play(
@@ -231,13 +247,13 @@ def play(
     """Up to ``episodes`` episodes from seed ``first``, in blocks of :data:`CHUNK` over ``workers`` processes
     (or Ray at ``address``), at most twice as many blocks in flight as workers; taken in episode order
     until ``enough`` holds."""
-    submit, end = _executor(workers, address)
+    submit, end, width = _executor(workers, address)
     report = EvaluationReport()
     pending: deque[Any] = deque()
     start = 0
     try:
         while True:
-            while len(pending) < 2 * workers and start < episodes:
+            while len(pending) < 2 * width and start < episodes:
                 count = min(CHUNK, episodes - start)
                 pending.append(submit(_play, source, make_env, count, first + start, first, chosen.name))
                 start += count
@@ -274,10 +290,10 @@ def evaluate(
     """Score ``policy`` (module docstring), or the policy a ``package.module:function`` spec makes for the
     task, on ``task``'s ``protocol`` (``PROTOCOLS``) and return its record: what ``lanro eval --json``
     prints, and under ``benchmark`` the protocol, its version and the first seed. ``episodes`` plays fewer
-    (for the correction test: caps them), which the record says; ``workers`` processes share the episodes,
-    or Ray's workers at ``address`` (``auto`` or ``ray://host:port``). With several workers the policy
-    must pickle, or come as a spec. A policy that raises or answers with no action fails with a
-    :class:`~lanrocli.evaluation.rollout.PolicyError` that names the episode."""
+    or more (for the correction test: caps them), which the record says (``complete``); ``workers``
+    processes share the episodes, or Ray's workers at ``address`` (``auto`` or ``ray://host:port``). With
+    several workers the policy must pickle, or come as a spec. A policy that raises or answers with no
+    action fails with a :class:`~lanrocli.evaluation.rollout.PolicyError` that names the episode."""
     return score(policy, task, protocol, episodes=episodes, workers=workers, address=address, label=label)[1]
 
 
@@ -333,7 +349,7 @@ def score(
             "protocol": chosen.name,
             "version": PROTOCOL_VERSION,
             "first_seed": first,
-            "complete": episodes is None,
+            "complete": episodes is None or episodes == (chosen.quota.episodes if chosen.quota else TEST_EPISODES),
         },
         "policy": label or (policy if isinstance(policy, str) else _label(policy)),
         "task": task,

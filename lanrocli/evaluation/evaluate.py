@@ -85,7 +85,8 @@ class EvaluationReport:
 
     def by_phrasing(self) -> dict[str, Rate]:
         """Among episodes in which a correction was spoken, by the paraphrase it was spoken in (the
-        paraphrase split; ``grammar`` where no paraphrase fitted): what each phrasing costs."""
+        paraphrase split; ``grammar`` where no paraphrase fitted): how often each phrasing was followed.
+        Which phrasing fits depends on the scene, so these are not paired with the control."""
         spoken = [r for r in self.results if r.corrected]
         names = sorted({r.phrasing or "grammar" for r in spoken})
         return {name: _rate([r for r in spoken if (r.phrasing or "grammar") == name]) for name in names}

@@ -137,7 +137,7 @@ def checked_action(action: Any, episode: Episode, first: int) -> np.ndarray:
     the shape of the action space and finite numbers (the environment clips them to [-1, 1])."""
     expected = episode.env.action_space.shape
     try:
-        array = np.asarray(action, dtype=np.float32)
+        array = np.asarray(action, dtype=np.float64)  # as the environment takes it: a float64 action stays exact
     except (TypeError, ValueError) as error:
         raise PolicyError(f"the policy's action in {_where(episode, first)} is not numbers: {error}") from None
     if array.shape != expected:

@@ -1,8 +1,9 @@
 """The generalisation splits in a run's records: which figure judges each split, and its drop from the same
 agent's in-distribution figure, for ``report.md``, ``lanro eval --split`` and ``lanro report``.
 
-A split that changes only what a correction says or when it comes is measured twice on the same seeds: on
-its held-out episodes and on its control, the same scenes, goals and instructions with nothing held out.
+A split that changes only what is said (a correction's words, the paraphrase split's verbs and corrections)
+or when a correction comes is measured twice on the same seeds: on its held-out episodes and on its control,
+the same scenes and goals with nothing held out.
 Its drop is taken from the control, so it is the held-out part's alone. Against the ordinary test it would
 also carry the difference between two samples of episodes, the test's few spoken corrections and the
 split's, which alone moves a drop by several points from seed to seed."""
@@ -132,9 +133,10 @@ def split_lines(splits: dict[str, dict[str, dict[str, Any]]], ordinary: dict[str
         "## Generalisation splits: the final stage's agents on what training never showed",
         "",
         "Each split's held-out episodes (docs/generalisation.md) against the same agent's in-distribution "
-        "figure: for the correction words and late corrections the control (the split's own seeds with nothing "
-        "held out), for the pairs the test above. Drop in points, positive where the split is harder, with its "
-        "95% paired bootstrap interval where there is a control. Success with 95% Wilson interval (episodes).",
+        "figure: for the correction words, late corrections and paraphrases the control (the split's own seeds "
+        "with nothing held out), for the pairs the test above. Drop in points, positive where the split is "
+        "harder, with its 95% paired bootstrap interval where there is a control. Success with 95% Wilson "
+        "interval (episodes).",
         "",
         "| split | agent | figure | split's episodes | in distribution | from | drop |",
         "|---|---|---|---|---|---|---|",

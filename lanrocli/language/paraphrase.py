@@ -73,7 +73,7 @@ what differs ("the other"), and shape words never heard."""
 
 
 @dataclass(frozen=True)
-class Scene:
+class Referents:
     """What a correction refers to: the objects, the goal, the object acted on and the objects a listener
     still considers; ``allowed`` drops the phrases the run holds out of corrections, so that the split tests
     its phrasing and nothing else held out."""
@@ -93,7 +93,7 @@ def _synonym(phrase: Phrase) -> list[str]:
     return [" ".join([*colour_words, word]) for word in SYNONYM_SHAPE_WORDS[phrase.shape]]
 
 
-def _other_words(scene: Scene) -> list[str]:
+def _other_words(scene: Referents) -> list[str]:
     """The ``{other}`` slot's fillings that single out the goal; empty where none does."""
     objects, goal, touched = scene.objects, scene.goal, scene.touched
     rest = scene.considered - {touched}
@@ -111,7 +111,7 @@ def _shape_phrase(shape: str, word: str) -> Phrase:
     return Phrase(Form.SHAPE, None, shape, word)
 
 
-def slot_fillings(scene: Scene) -> dict[str, list[str]]:
+def slot_fillings(scene: Referents) -> dict[str, list[str]]:
     """Each slot's possible words in ``scene``; an empty list where the slot cannot be filled truthfully."""
     goal_phrases = scene.allowed(naming_phrases(scene.objects, scene.goal, scene.considered))
     return {
@@ -144,7 +144,7 @@ def _shortest(paraphrase: Paraphrase, fillings: dict[str, list[str]]) -> int:
     return own + sum(min(_words(f) for f in fillings[slot]) for slot in slots)
 
 
-def applicable(form: CorrectionForm, scene: Scene, max_words: int | None = None) -> list[Paraphrase]:
+def applicable(form: CorrectionForm, scene: Referents, max_words: int | None = None) -> list[Paraphrase]:
     """The paraphrases that may stand in for a correction of ``form`` in ``scene``: each slot fillable, in
     at most ``max_words`` words where given."""
     fillings = slot_fillings(scene)
@@ -153,7 +153,7 @@ def applicable(form: CorrectionForm, scene: Scene, max_words: int | None = None)
 
 
 def paraphrase_correction(
-    rng: np.random.Generator, form: CorrectionForm, scene: Scene, max_words: int | None = None
+    rng: np.random.Generator, form: CorrectionForm, scene: Referents, max_words: int | None = None
 ) -> tuple[str, str] | None:
     """A correction of ``form`` in a phrasing the grammar never speaks, in at most ``max_words`` words
     (the room an observation's sentence has left), and its paraphrase's name; None where no paraphrase

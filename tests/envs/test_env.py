@@ -382,11 +382,11 @@ def test_chains_of_corrections_get_room_in_the_sentence() -> None:
         LanroEnv("push", objects=3, max_corrections=2, vocabulary=grammar_vocabulary())
 
 
-def test_unknown_words_hide_the_same_places_all_episode_and_never_in_evaluation() -> None:
-    """Training's unknown words: a share of the sentence read as <unk>, at places drawn once an episode, so
+def test_word_dropout_hides_the_same_places_all_episode_and_never_in_evaluation() -> None:
+    """Training's word dropout: a share of the sentence read as <unk>, at places drawn once an episode, so
     a correction appended later keeps the instruction as it was read; evaluation reads every word."""
-    settings = EnvSettings(objects=2, correction_rate=0.0, unknown_words=0.3)
-    env, plain = LanroEnv("reach", settings), LanroEnv("reach", settings.replace(unknown_words=0.0))
+    settings = EnvSettings(objects=2, correction_rate=0.0, word_dropout=0.3)
+    env, plain = LanroEnv("reach", settings), LanroEnv("reach", settings.replace(word_dropout=0.0))
     hidden = total = 0
     for seed in range(20):
         observation, info = env.reset(seed=seed)
@@ -399,6 +399,6 @@ def test_unknown_words_hide_the_same_places_all_episode_and_never_in_evaluation(
             assert np.array_equal((observation["instruction"] == UNK_ID) & (words != PAD_ID), unread)
         hidden, total = hidden + int(unread.sum()), total + int((words != PAD_ID).sum())
     assert 0.15 < hidden / total < 0.45
-    assert settings.for_evaluation().unknown_words == 0.0
-    with pytest.raises(ValueError, match="unknown_words"):
-        EnvSettings(unknown_words=1.0)
+    assert settings.for_evaluation().word_dropout == 0.0
+    with pytest.raises(ValueError, match="word_dropout"):
+        EnvSettings(word_dropout=1.0)

@@ -46,10 +46,16 @@ def evaluate_command(
             "name and returns a policy (docs/benchmark.md), scored on --protocol.",
         ),
     ],
-    task: Annotated[Task | None, typer.Option(help="Task (scripted policies; default reach).")] = None,
+    task: Annotated[
+        Task | None, typer.Option(help="Task (scripted policies, default reach; your own policy, required).")
+    ] = None,
     episodes: Annotated[
         int | None,
-        typer.Option(min=1, help="Number of episodes (default: a checkpoint's test.episodes, else 100)."),
+        typer.Option(
+            min=1,
+            help="Number of episodes (default: a checkpoint's test.episodes, else 100; with --protocol, the "
+            "protocol's, and for its correction test the most it plays).",
+        ),
     ] = None,
     seed: Annotated[
         int | None,
@@ -139,7 +145,8 @@ def evaluate_command(
         if others or second_corrections is not None or acting_attention is not None:
             raise fail(
                 "a benchmark protocol fixes its episodes, sentences and settings; leave out --correction-test, "
-                "--split, --seed, --instruction, --gif, --acting-attention and the environment options"
+                "--second-corrections, --split, --seed, --instruction, --gif, --acting-attention and the "
+                "environment options"
             )
         _score(what, task, protocol or "test", episodes, device, workers, address, as_json)
         return
@@ -260,8 +267,6 @@ def _score(
     from lanrocli.evaluation.protocols import PROTOCOL_VERSION
     from lanrocli.evaluation.rollout import PolicyError
 
-    if protocol not in PROTOCOLS:
-        raise fail(f"unknown protocol {protocol!r}: choose one of {', '.join(PROTOCOLS)}")
     policy: Any
     if ":" in what:
         if task is None:
@@ -278,22 +283,24 @@ def _score(
         path = _trained_agent(what)
         if not path.exists():
             raise fail(f"{path} is neither a policy nor an existing checkpoint path")
+        from lanrocli.train.errors import CheckpointError
+
         try:
             settings, policy = load_policy(path, pick_device(device))
-        except (ValueError, KeyError) as error:
+        except (CheckpointError, ValueError, KeyError) as error:
             raise fail(f"cannot load a trained agent from {path}: {error}") from None
         if task is not None and task != settings.task:
             raise fail(f"{path} was trained on {settings.task}; it cannot be scored on {task}")
         task_name = settings.task
-    count = workers or os.cpu_count() or 1
+    count = workers or len(os.sched_getaffinity(0))
     try:
         report, record = score(
             policy, task_name, protocol, episodes=episodes, workers=count, address=address, label=what
         )
     except PolicyError as error:
         raise fail(f"{what}: {error}") from None
-    except ValueError as error:
-        raise fail(str(error)) from None
+    except (TypeError, ValueError) as error:
+        raise fail(f"{what}: {error}") from None
     if as_json:
         typer.echo(json.dumps(record))
         return
