@@ -35,6 +35,13 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--steps", type=int, nargs="+", default=[20_000, 20_000, 30_000], help="steps per stage")
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument(
+        "--from-stage",
+        type=int,
+        default=0,
+        help="go on from the model saved after the stage before this one (counted from 0); its replay buffer "
+        "was not saved, so it starts empty: not the run an uninterrupted one would have been",
+    )
     args = parser.parse_args()
 
     from stable_baselines3 import SAC
@@ -55,6 +62,8 @@ def main() -> None:
         )
         return MultiDiscreteInstruction(env)
 
+    args.out.mkdir(parents=True, exist_ok=True)
+    stages = json.loads((args.out / RECORD).read_text())["stages"][: args.from_stage] if args.from_stage else []
     model = SAC(
         "MultiInputPolicy",
         stage_env(0),
@@ -69,16 +78,20 @@ def main() -> None:
         seed=args.seed,
         device="cpu",
     )
-    args.out.mkdir(parents=True, exist_ok=True)
-    stages = []
+    if args.from_stage:
+        model = SAC.load(args.out / MODEL, env=stage_env(args.from_stage), device="cpu")
     for index, (stage, steps) in enumerate(zip(curriculum.stages, args.steps, strict=True)):
+        if index < args.from_stage:
+            continue
         if index:
             model.set_env(stage_env(index))
         start = time.perf_counter()
-        model.learn(steps, reset_num_timesteps=index == 0)
+        model.learn(steps, reset_num_timesteps=index == 0 and not args.from_stage)
         stages.append({"stage": stage.name, "steps": steps, "seconds": round(time.perf_counter() - start, 1)})
         model.save(args.out / MODEL)
         record = {"curriculum": curriculum.name, "task": curriculum.task, "seed": args.seed, "stages": stages}
+        if args.from_stage:
+            record["resumed_at_stage"] = args.from_stage
         (args.out / RECORD).write_text(json.dumps(record, indent=1))
         print(json.dumps(stages[-1]), flush=True)
 
