@@ -13,7 +13,7 @@ from lanrocli.envs.instructor import Instructor
 from lanrocli.envs.scene import Scene, check_scenes, sample_scene
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.starts import place_arm
-from lanrocli.language import COLOURS, PAD_ID, SHAPES, UNK_ID, Vocabulary, grammar_vocabulary, max_sentence_words
+from lanrocli.language import COLOURS, SHAPES, Vocabulary, grammar_vocabulary, max_sentence_words
 from lanrocli.language.holdout import NOTHING_HELD_OUT, Holdout
 from lanrocli.sim import (
     MAX_STEP,
@@ -160,7 +160,6 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._properties = np.zeros((objects, len(COLOURS) + len(SHAPES)), dtype=np.float32)
         self._empty_slots = np.zeros((slots - objects) * OBJECT_SIZE)
         self._tokens = np.zeros(self.vocabulary.max_length, dtype=np.int64)
-        self._unread = np.zeros(self.vocabulary.max_length, dtype=bool)
         self._achieved = np.zeros(objects, dtype=bool)
         self._steps = 0
         self._fell = False
@@ -203,19 +202,11 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self.instructor.start(rng, scene, challenge)
         if self.settings.mistake_start > 0.0 and rng.random() < self.settings.mistake_start:
             self._act_on_a_wrong_object(rng)
-        if self.settings.word_dropout > 0:  # drawn only then, so that other runs' episodes stay as they were
-            self._unread = rng.random(self.vocabulary.max_length) < self.settings.word_dropout
-        self._tokens = self._read(self.instructor.text)
+        self._tokens = self.vocabulary.encode(self.instructor.text)
         self._steps = 0
         self._achieved = self._evaluate()
         self._fell = False
         return self._observation(), self._info()
-
-    def _read(self, text: str) -> np.ndarray:
-        """The sentence as the agent observes it: its words' ids, those at the places the episode drew
-        (``word_dropout``) read as ``<unk>``, the same places all episode, so a word does not flicker."""
-        tokens = self.vocabulary.encode(text)
-        return np.where(self._unread & (tokens != PAD_ID), UNK_ID, tokens)
 
     def _act_on_a_wrong_object(self, rng: np.random.Generator) -> None:
         """The task done on a random wrong object by the scripted oracle before the first step, unseen by the
@@ -246,7 +237,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         self._achieved = self._evaluate()
         # The instructor judges the state this step produced, so a correction is in this very observation.
         if self.instructor.observe(self.np_random, self._steps, self._achieved):
-            self._tokens = self._read(self.instructor.text)
+            self._tokens = self.vocabulary.encode(self.instructor.text)
         success = bool(self._achieved[self._scene.goal_index])
         # Truncated, not terminated: ending there must not look like the zero future value of a success.
         self._fell = not success and bool(self.objects.states().positions[self._scene.goal_index, 2] < FALLEN)

@@ -85,16 +85,6 @@ class EnvSettings:
         ),
     )
 
-    word_dropout: float = field(
-        default=0.0,
-        metadata=_help(
-            "Share of the words of each sentence the instructor speaks that the agent reads as <unk> (word dropout, "
-            "for training), so that it learns to act on sentences with words it does not know, as a person's "
-            "phrasing has; hindsight's relabelled sentences are read whole.",
-            option=False,
-        ),
-    )
-
     def __post_init__(self) -> None:
         if isinstance(self.objects, bool) or self.objects not in (2, 3):
             raise ValueError(f"objects must be 2 or 3, got {self.objects!r}")
@@ -108,8 +98,6 @@ class EnvSettings:
             raise ValueError(f"random_start must be a probability within [0, 1], got {self.random_start}")
         if not 0.0 <= self.mistake_start <= 1.0:
             raise ValueError(f"mistake_start must be a probability within [0, 1], got {self.mistake_start}")
-        if not 0.0 <= self.word_dropout < 1.0:
-            raise ValueError(f"word_dropout must be a share within [0, 1), got {self.word_dropout}")
         if not 0.0 <= self.object_start <= 1.0 - self.random_start:
             raise ValueError(
                 f"object_start must be within [0, 1 - random_start] = [0, {1.0 - self.random_start:g}] (the two "
@@ -138,13 +126,12 @@ class EnvSettings:
         return CORRECTION_LIMIT if self.correction_rate > 0 else PLAIN_LIMIT
 
     def for_evaluation(self, correction_rate: float | None = None) -> EnvSettings:
-        """These settings as evaluation uses them: every episode starts from the neutral pose, the agent
-        reads every word it knows, and it acts in all episodes (random, object and mistake starts and
-        word dropout are for training), so
+        """These settings as evaluation uses them: every episode starts from the neutral pose and the agent
+        acts in all of them (random, object and mistake starts are for training), so
         success is comparable across runs and curricula.
         ``correction_rate``, where given, replaces a non-zero share of correction episodes; settings without
         corrections keep none, since their episodes are not built to hold one."""
-        training_only = ("random_start", "object_start", "mistake_start", "word_dropout")
+        training_only = ("random_start", "object_start", "mistake_start")
         changes: dict[str, Any] = dict.fromkeys(training_only, 0.0)
         if correction_rate is not None and self.correction_rate > 0:
             changes["correction_rate"] = correction_rate

@@ -85,7 +85,6 @@ def test_env_section_is_the_environments_settings() -> None:
         "random_start": 0.0,
         "object_start": 0.0,
         "mistake_start": 0.0,
-        "word_dropout": 0.0,
     }
     assert list(EnvConfig.model_fields) == [f.name for f in dataclasses.fields(EnvSettings)]
 

@@ -10,12 +10,9 @@ from gymnasium.utils.env_checker import check_env
 from lanrocli.envs.env import LanroEnv, observation_size
 from lanrocli.envs.policies import make_policy
 from lanrocli.envs.registration import ENV_IDS
-from lanrocli.envs.settings import EnvSettings
 from lanrocli.language import (
-    PAD_ID,
     RARE_WORD_COLOURS,
     SHAPE_WORDS,
-    UNK_ID,
     all_corrections,
     all_instructions,
     grammar_vocabulary,
@@ -380,25 +377,3 @@ def test_chains_of_corrections_get_room_in_the_sentence() -> None:
     env.close()
     with pytest.raises(ValueError, match="encodes at most 10"):
         LanroEnv("push", objects=3, max_corrections=2, vocabulary=grammar_vocabulary())
-
-
-def test_word_dropout_hides_the_same_places_all_episode_and_never_in_evaluation() -> None:
-    """Training's word dropout: a share of the sentence read as <unk>, at places drawn once an episode, so
-    a correction appended later keeps the instruction as it was read; evaluation reads every word."""
-    settings = EnvSettings(objects=2, correction_rate=0.0, word_dropout=0.3)
-    env, plain = LanroEnv("reach", settings), LanroEnv("reach", settings.replace(word_dropout=0.0))
-    hidden = total = 0
-    for seed in range(20):
-        observation, info = env.reset(seed=seed)
-        words = env.vocabulary.encode(info["instruction_text"])
-        assert np.array_equal(plain.reset(seed=seed)[0]["instruction"], words)  # the same episode, read whole
-        unread = (observation["instruction"] == UNK_ID) & (words != PAD_ID)
-        assert np.array_equal(np.where(unread, words, observation["instruction"]), words)
-        for _ in range(3):
-            observation = env.step(np.zeros(3, dtype=np.float32))[0]
-            assert np.array_equal((observation["instruction"] == UNK_ID) & (words != PAD_ID), unread)
-        hidden, total = hidden + int(unread.sum()), total + int((words != PAD_ID).sum())
-    assert 0.15 < hidden / total < 0.45
-    assert settings.for_evaluation().word_dropout == 0.0
-    with pytest.raises(ValueError, match="word_dropout"):
-        EnvSettings(word_dropout=1.0)
