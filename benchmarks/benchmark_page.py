@@ -28,8 +28,11 @@ from typing import Any
 import lanrocli
 from lanrocli.evaluation.protocols import PROTOCOL_VERSION, PROTOCOLS
 from lanrocli.evaluation.splits import with_interval
+from lanrocli.tasks import TASKS
 
 ROOT = Path(__file__).resolve().parent.parent
+ORDER = {"lanro": 0, "oracle": 2, "mistaken": 3, "random": 4}
+"""Rows in this order: lanro's agents, the other learners, then the scripted policies."""
 SCRIPTED = ("oracle", "mistaken", "random")
 COLUMNS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("test", "test: success", ()),
@@ -123,16 +126,19 @@ def tables(records: Path) -> str:
         f"Protocol version {PROTOCOL_VERSION}. One policy: success in % [95% Wilson interval] (episodes counted). "
         "A learner's seeds: mean [lowest, highest] over its seeds. `-`: not scored yet."
     ]
-    for task_folder in sorted(p for p in records.iterdir() if p.is_dir()):
+    folders = {p.name: p for p in records.iterdir() if p.is_dir()} if records.is_dir() else {}
+    for task_folder in [folders[task] for task in TASKS if task in folders]:
         by_label: dict[str, list[dict[str, Any]]] = {}
         for path in sorted(task_folder.glob("*.json")):
             kept = json.loads(path.read_text())
+            if not kept:
+                continue
             label = next(iter(kept.values()))["policy"]
             group = label.rsplit(", seed", 1)[0]
             by_label.setdefault(group, []).append(kept)
         lines += ["", f"## {task_folder.name}", "", "| policy | " + " | ".join(c[1] for c in COLUMNS) + " |"]
         lines.append("|---" * (len(COLUMNS) + 1) + "|")
-        for group, kept in by_label.items():
+        for group, kept in sorted(by_label.items(), key=lambda item: ORDER.get(item[0].split(",")[0], 1)):
             cells = [cell([rate(k.get(protocol), where) for k in kept]) for protocol, _, where in COLUMNS]
             lines.append(f"| {group} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
