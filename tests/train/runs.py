@@ -35,7 +35,7 @@ stages:
   - name: third
     env: {{objects: 3, mode: colour_shape, correction_rate: 0.5, negations: true, max_episode_steps: 20}}
     budget: {{steps: 80}}
-holdout: {{pairs: [red cube], correction_words: [block, brick, barrel], late_corrections: [1, 4]}}
+holdout: {{pairs: [red cube], correction_words: [block, brick, barrel], late_corrections: [1, 4], paraphrase: true}}
 """
 
 

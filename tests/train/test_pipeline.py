@@ -19,7 +19,7 @@ from lanrocli.envs.settings import EnvSettings
 from lanrocli.evaluation.evaluate import EvaluationReport
 from lanrocli.evaluation.metrics import EpisodeResult, wilson_interval
 from lanrocli.evaluation.quota import CORRECTION_QUOTA
-from lanrocli.evaluation.splits import CONTROL, CONTROLLED, DROP
+from lanrocli.evaluation.splits import CONTROL, CONTROLLED, DROP, SPLIT_FIGURES
 from lanrocli.train.checkpoint import AGENT_FILE, resolve_checkpoint
 from lanrocli.train.errors import RunError
 from lanrocli.train.pipeline import CurriculumRun, RunObserver
@@ -193,6 +193,11 @@ def test_the_run_folder_has_every_file(straight: Baseline) -> None:
     assert resolve_checkpoint(out) == read_pointer(out / "stage-3-third" / "last")
     table = (out / REPORT).read_text()
     assert "| 1. first | overall >= 1, 1 pooled | 80 of 80 | budget |" in table and "Status: finished" in table
+    # each stage's time shared among its phases, its tests included: five shares that sum to about 100
+    lines = [line for line in table.splitlines() if line.startswith(("| 1. first", "| 2. second", "| 3. third"))]
+    shares = [[int(x) for x in line.split("|")[-2].strip(" %").split(" / ")] for line in lines[:3]]
+    assert "time: collecting / updating / evaluating / tests / rest" in table
+    assert all(len(s) == 5 and 98 <= sum(s) <= 102 and s[3] > 0 for s in shares), shares
     # Every stage's agents were measured on its test episodes, and report.md quotes those figures.
     for index, name in enumerate(["first", "second", "third"], start=1):
         tested = json.loads((out / f"stage-{index}-{name}" / "test.json").read_text())
@@ -202,7 +207,7 @@ def test_the_run_folder_has_every_file(straight: Baseline) -> None:
     assert set(tested["language"]) == {"true", "blank", "other"}
     assert set(tested[CORRECTION_TEST]) == {"last", "best"} and "## Correction test" in table
     # ... and on each generalisation split of the holdout, on held-out episodes of the split's own.
-    assert list(tested[SPLITS]) == ["pairs", "correction_words", "late_corrections"]
+    assert list(tested[SPLITS]) == ["pairs", "correction_words", "late_corrections", "paraphrase"]
     for split, records in tested[SPLITS].items():
         assert set(records) == {"last", "best"}
         for record in records.values():
@@ -216,7 +221,7 @@ def test_the_run_folder_has_every_file(straight: Baseline) -> None:
                     "control_of": split,
                     "first_seed": split_test_seed(5, 2, Split(split)),
                 }
-                assert set(record[DROP]) == {"corrected"}
+                assert set(record[DROP]) == {f.name for f in SPLIT_FIGURES if f.split is Split(split)}
             else:
                 assert CONTROL not in record
         assert f"| {split} | last |" in table
