@@ -114,7 +114,8 @@ def cell(found: list[dict[str, Any] | None]) -> str:
     if len(found) == 1:
         return with_interval(rates[0])
     values = [100 * r["success"] for r in rates]
-    return f"{statistics.mean(values):.1f} [{min(values):.1f}, {max(values):.1f}] ({len(values)} seed{'s' if len(values) > 1 else ''})"
+    seeds = f"{len(values)} seed" + ("s" if len(values) > 1 else "")
+    return f"{statistics.mean(values):.1f} [{min(values):.1f}, {max(values):.1f}] ({seeds})"
 
 
 BEGIN, END = "<!-- tables: written by benchmarks/benchmark_page.py -->", "<!-- end of tables -->"
