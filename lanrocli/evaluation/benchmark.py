@@ -277,16 +277,7 @@ def _label(policy: Any) -> str:
     return getattr(policy, "name", None) or type(policy).__name__
 
 
-def evaluate(
-    policy: Any,
-    task: str,
-    protocol: str = "test",
-    *,
-    episodes: int | None = None,
-    workers: int = 1,
-    address: str | None = None,
-    label: str | None = None,
-) -> dict[str, Any]:
+def evaluate(policy: Any, task: str, protocol: str = "test", **options: Any) -> dict[str, Any]:
     """Score ``policy`` (module docstring), or the policy a ``package.module:function`` spec makes for the
     task, on ``task``'s ``protocol`` (``PROTOCOLS``) and return its record: what ``lanro eval --json``
     prints, and under ``benchmark`` the protocol, its version and the first seed. ``episodes`` plays fewer
@@ -294,7 +285,7 @@ def evaluate(
     processes share the episodes, or Ray's workers at ``address`` (``auto`` or ``ray://host:port``). With
     several workers the policy must pickle, or come as a spec. A policy that raises or answers with no
     action fails with a :class:`~lanrocli.evaluation.rollout.PolicyError` that names the episode."""
-    return score(policy, task, protocol, episodes=episodes, workers=workers, address=address, label=label)[1]
+    return score(policy, task, protocol, **options)[1]
 
 
 def score(
@@ -307,7 +298,8 @@ def score(
     address: str | None = None,
     label: str | None = None,
 ) -> tuple[EvaluationReport, dict[str, Any]]:
-    """:func:`evaluate`'s report and record, for the command line, which prints the report as a table."""
+    """:func:`evaluate`'s report and record (``options`` are these keywords), for the command line, which
+    prints the report as a table."""
     chosen = find_protocol(protocol_name)
     if workers < 1:
         raise ValueError(f"workers must be at least 1, got {workers}")

@@ -304,7 +304,8 @@ def _score(
     if as_json:
         typer.echo(json.dumps(record))
         return
-    print_evaluation(report, f"{what} on {task_name}, protocol {protocol} (version {PROTOCOL_VERSION})")
+    described = PROTOCOLS[protocol].description
+    print_evaluation(report, f"{what} on {task_name}, protocol {protocol} (version {PROTOCOL_VERSION}): {described}")
     if "split" in record:
         from lanrocli.evaluation.splits import control_lines
 
