@@ -21,6 +21,11 @@ the same episodes as a person typing them:
    when that object falls off the table.
 4. The next line is the next episode's instruction, until the input ends or ``episodes`` were played.
 
+With ``questions`` (``--questions 1``) the agent may ask "which one?" where its attention, read by the rule
+its question test calibrates (:mod:`lanrocli.evaluation.asking`), keeps other than exactly one object: the
+question names the objects it keeps, and the next line is the person's answer, appended to the sentence as
+a correction is. The question takes no step here: the scene waits for the person.
+
 An instruction that cannot be read (an empty line, or more words than the agent reads) is asked for again
 in a terminal; from a pipe, where every later line would be misread, it ends play with a ``PlayError``.
 Empty lines between episodes are skipped, though: they are the "go on" lines of an episode that ended
@@ -46,6 +51,7 @@ from lanrocli.agent.policy import AgentPolicy
 from lanrocli.envs.caption import caption
 from lanrocli.envs.env import IMAGE_SIZE, LanroEnv
 from lanrocli.envs.settings import CORRECTION_LIMIT, EnvSettings
+from lanrocli.evaluation.asking import kept
 from lanrocli.evaluation.evaluate import save_gif
 from lanrocli.language import TASK_VERBS, ObjectProps
 from lanrocli.language.typed import Grammar, Utterance, unknown_words, words_of
@@ -185,8 +191,13 @@ def play(path: Path, options: PlayOptions, stream: TextIO, console: Console) -> 
         env = LanroEnv(task, settings, object_slots=slots, gui=options.gui, vocabulary=policy.vocabulary)
     except pybullet.error as error:
         raise PlayError(f"PyBullet could not open its window: {error}") from None
+    threshold = None
+    if settings.questions:
+        from lanrocli.train.testset import calibrated_rule
+
+        threshold = calibrated_rule(agent_path(path), pick_device(options.device)).threshold
     try:
-        return Session(env, policy, Lines(stream, console), console, options).run()
+        return Session(env, policy, Lines(stream, console), console, options, threshold).run()
     finally:
         env.close()
 
@@ -195,9 +206,17 @@ class Session:
     """The episodes of one agent in one environment, as the person's lines drive them."""
 
     def __init__(
-        self, env: LanroEnv, policy: AgentPolicy, lines: Lines, console: Console, options: PlayOptions
+        self,
+        env: LanroEnv,
+        policy: AgentPolicy,
+        lines: Lines,
+        console: Console,
+        options: PlayOptions,
+        threshold: float | None = None,
     ) -> None:
         self.env = env
+        self.threshold = threshold
+        """The calibrated rule's threshold where the agent may ask (``questions``), else None."""
         self.policy = policy
         self.lines = lines
         self.console = console
@@ -279,11 +298,18 @@ class Session:
         tokens = self.vocabulary.encode(utterance.text)
         frames = [self._frame(utterance)] if self.options.gif else None
         steps, limit = 0, self.env.max_episode_steps
+        questions = self.env.settings.questions
+        asks = np.full(1 if questions else 0, -1.0)  # the person answers here, not the environment's instructor
         while True:
             for _ in range(self.options.steps_per_line):
-                observation, _, _, _, info = self.env.step(
-                    self.policy.act({**observation, "instruction": tokens}, info)
-                )
+                if questions and (asked := self._question(observation, tokens, utterance, objects)) is not None:
+                    questions -= 1
+                    if asked:
+                        utterance = utterance.corrected(asked)
+                        target = self._heard(utterance, asked, objects)
+                        tokens = self.vocabulary.encode(utterance.text)
+                action = self.policy.act({**observation, "instruction": tokens}, info)
+                observation, _, _, _, info = self.env.step(np.concatenate([action, asks]))
                 steps += 1
                 if frames is not None:
                     frames.append(self._frame(utterance))
@@ -307,6 +333,36 @@ class Session:
                 self.say(f"correction at step {steps}: the agent now reads '{utterance.text}'")
                 target = self._heard(utterance, words, objects)
                 tokens = self.vocabulary.encode(utterance.text)
+
+    def _question(
+        self,
+        observation: dict[str, np.ndarray],
+        tokens: np.ndarray,
+        utterance: Utterance,
+        objects: Sequence[ObjectProps],
+    ) -> list[str] | None:
+        """Where the rule asks on the sentence the agent reads now, the question put to the person and the
+        words of their answer, empty where none fits (no answer, or too long to read); None where the rule
+        does not ask."""
+        assert self.threshold is not None
+        shown = {key: value[None] for key, value in {**observation, "instruction": tokens}.items()}
+        _, weights = self.policy.act_batch(shown)
+        assert weights is not None
+        keep = np.flatnonzero(kept(weights[0][: len(objects)], self.threshold))
+        if len(keep) == 1:
+            return None
+        choices = " or ".join(f"the {name(objects[i])}" for i in (keep if len(keep) else range(len(objects))))
+        self.say(f"the agent asks: which one: {choices}?", style="bold")
+        words = words_of(self.lines.read("answer") or "")
+        if not words:
+            self.say("no answer: the agent acts on its own reading")
+            return []
+        answered = utterance.corrected(words)
+        if answered.length > self.vocabulary.max_length:
+            self.warn(f"'{answered.text}' would have {answered.length} words, more than the agent reads: not given")
+            return []
+        self.say(f"answer: the agent now reads '{answered.text}'")
+        return words
 
     def _frame(self, utterance: Utterance) -> np.ndarray:
         """The camera image captioned with the person's sentence (the environment's own would show the

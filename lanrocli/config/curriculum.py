@@ -26,6 +26,7 @@ from lanrocli.config.sections import (
     EvalConfig,
     HeldOutConfig,
     HoldoutConfig,
+    QuestionsConfig,
     Stage,
 )
 from lanrocli.config.yamlfile import CurriculumError, KeyProblem, Problem, parse, read, validate
@@ -75,6 +76,8 @@ class Curriculum(BaseModel):
     test: HeldOutConfig = Field(default_factory=HeldOutConfig)
     stages: list[Stage]
     holdout: HoldoutConfig = Field(default_factory=HoldoutConfig)
+    questions: QuestionsConfig | None = None
+    """The question test of the final agents, where given (docs/questions.md)."""
 
     @field_validator("stages")
     @classmethod
@@ -102,7 +105,33 @@ class Curriculum(BaseModel):
                 stage.env.settings().check_task(task)
             except ValueError as error:
                 raise ValueError(f"stages[{index}].env: {error}") from None
+            if stage.env.questions:
+                raise KeyProblem(
+                    (index, "env", "questions"),
+                    "questions are asked by a rule calibrated on the trained agent's attention, not in training: "
+                    "leave them out of the stages and add a top-level `questions:` section (docs/questions.md)",
+                )
         return stages
+
+    @field_validator("questions")
+    @classmethod
+    def _questions_fit_the_plan(cls, questions: QuestionsConfig | None, info: ValidationInfo) -> QuestionsConfig | None:
+        """The question test needs an agent that attends to objects and a last stage with room for an answer
+        and a correction after it."""
+        stages: list[Stage] | None = info.data.get("stages")
+        agent: AgentConfig | None = info.data.get("agent")
+        if questions is None or not stages or agent is None:
+            return questions
+        if agent.settings().architecture != "objects":
+            raise ValueError(
+                "the question test reads the agent's attention over the objects: set agent.architecture: objects"
+            )
+        last = stages[-1].env.settings()
+        try:
+            last.replace(**questions.changes())
+        except ValueError as error:
+            raise ValueError(f"the last stage cannot be tested with questions: {error}") from None
+        return questions
 
     @field_validator("holdout")
     @classmethod
@@ -209,7 +238,7 @@ def packaged_curricula() -> dict[str, Path]:
     push`` runs the same file from any directory and any install. They are read as files, not as resources,
     because ``extends`` names its parent by a path beside the file."""
     folder = Path(str(files("lanrocli") / PACKAGED))
-    return {path.stem: path for path in sorted(folder.glob("*.yaml"))}
+    return {path.stem: path for path in sorted(folder.glob("*.yaml"), key=lambda path: path.stem)}
 
 
 def find_curriculum(text: str) -> Path:

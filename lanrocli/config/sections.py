@@ -8,6 +8,7 @@ neither torch nor pybullet."""
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
 from typing import Any, ClassVar, Literal
 
@@ -206,6 +207,49 @@ class HeldOutConfig(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     episodes: int = Field(500, gt=0)
+
+
+class QuestionsConfig(BaseModel):
+    """The question test at the end of the run (docs/questions.md): the final agents asking "which one?" by a
+    rule calibrated on their attention, and the same agents with questions off, on held-out episodes."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    level: float = Field(0.97, gt=0.0, lt=1.0)
+    """The share of scenes on which the rule keeps the object the speaker means."""
+    calibration_episodes: int = Field(300, gt=0)
+    """Scenes the rule is calibrated on, none of a test's."""
+    episodes: int = Field(600, gt=0)
+    """Held-out episodes of the test, every one a correction episode of any kind."""
+    penalty: float = Field(0.0, ge=0.0)
+    """Reward taken off for each question."""
+    steps: int = Field(1, ge=0)
+    """Steps a question takes, the arm holding still."""
+
+    @model_validator(mode="after")
+    def _enough_scenes(self) -> QuestionsConfig:
+        needed = math.ceil(1.0 / (1.0 - self.level))
+        if self.calibration_episodes < needed:
+            raise ValueError(
+                f"calibration_episodes ({self.calibration_episodes}) are too few for level {self.level:g}: the rule "
+                f"needs at least {needed}, else it asks in every episode"
+            )
+        if self.steps == 0 and self.penalty == 0.0:
+            raise ValueError("a question that takes no step and costs no reward is free: set steps or penalty above 0")
+        return self
+
+    def changes(self) -> dict[str, Any]:
+        """The last stage's settings as the test changes them: one question, every episode a correction
+        episode of any kind (rare words on, so that common-ground episodes exist)."""
+        return {
+            "correction_rate": 1.0,
+            "kinds": None,
+            "negation_rate": None,
+            "rare_words": True,
+            "questions": 1,
+            "question_penalty": self.penalty,
+            "question_steps": self.steps,
+        }
 
 
 class HoldoutConfig(BaseModel):

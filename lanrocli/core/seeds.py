@@ -7,8 +7,8 @@ evaluation episode is a training or test episode, whatever the run's seed or the
 Evaluation draws a new block for every evaluation (fresh episodes, yet the same ones when a resumed run
 repeats that evaluation); the test set is block 0 of its stage and never changes. The correction test
 (every episode a correction episode, as many as it takes to hear enough corrections) has a purpose of its
-own, so its episodes are none of the ordinary test's either, and so has each generalisation split and
-the benchmark's protocols.
+own, so its episodes are none of the ordinary test's either, and so has each generalisation split, the
+question test, the scenes its rule for asking is calibrated on, and the benchmark's protocols.
 """
 
 from __future__ import annotations
@@ -28,6 +28,8 @@ class Purpose(IntEnum):
     CORRECTION_TEST = 3
     SPLIT_TEST = 4
     BENCHMARK = 5
+    CALIBRATION = 6
+    QUESTION_TEST = 7
 
 
 def first_seed(purpose: Purpose, run_seed: int, stage: int, block: int = 0) -> int:
@@ -56,6 +58,16 @@ def correction_test_seed(run_seed: int, stage: int) -> int:
 def split_test_seed(run_seed: int, stage: int, split: Split) -> int:
     """First seed of a generalisation split's held-out episodes: each split is a block of its own."""
     return first_seed(Purpose.SPLIT_TEST, run_seed, stage, list(Split).index(split))
+
+
+def calibration_seed(run_seed: int, stage: int) -> int:
+    """First seed of the scenes a rule for asking questions is calibrated on: never a test's."""
+    return first_seed(Purpose.CALIBRATION, run_seed, stage)
+
+
+def question_test_seed(run_seed: int, stage: int) -> int:
+    """First seed of a stage's held-out question-test episodes."""
+    return first_seed(Purpose.QUESTION_TEST, run_seed, stage)
 
 
 def benchmark_seed(task: str, protocol: int) -> int:

@@ -53,43 +53,46 @@ def observation_size(n_objects: int) -> int:
 class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
     """A Panda on a table with 2 or 3 objects and an instructor that speaks, watches and corrects.
 
-    Observation ``{"observation": float32[N], "instruction": int64[L]}`` with N = 7 + 31 ``object_slots``
-    (by default the number of objects; a curriculum whose stages differ in objects gives every stage the
-    largest number, so one network reads them all, and the slots without an object are zeros):
+        Observation ``{"observation": float32[N], "instruction": int64[L]}`` with N = 7 + 31 ``object_slots``
+        (by default the number of objects; a curriculum whose stages differ in objects gives every stage the
+        largest number, so one network reads them all, and the slots without an object are zeros):
 
-    - ``[0:3]`` end-effector position (m), ``[3:6]`` its velocity (m/s), ``[6]`` finger width (m);
-    - per object k (in the order of ``info["objects"]``), from ``7 + 31 k``: position (3), position minus
-      the end-effector position (3), position minus the position at reset (3), orientation quaternion
-      x y z w (4), linear velocity (3), angular velocity (3), one-hot colour (9, in the order of
-      ``lanrocli.language.COLOURS``), one-hot shape (3, ``cube cuboid cylinder``).
+        - ``[0:3]`` end-effector position (m), ``[3:6]`` its velocity (m/s), ``[6]`` finger width (m);
+        - per object k (in the order of ``info["objects"]``), from ``7 + 31 k``: position (3), position minus
+          the end-effector position (3), position minus the position at reset (3), orientation quaternion
+          x y z w (4), linear velocity (3), angular velocity (3), one-hot colour (9, in the order of
+          ``lanrocli.language.COLOURS``), one-hot shape (3, ``cube cuboid cylinder``).
 
-    The displacement since reset is what lets the observation tell how far an object has moved: reach on an
-    object fails once it was knocked more than 2.5 cm, and push succeeds once its object slid far enough,
-    both measured from where the objects started. Without it, a knocked object at rest looks like an
-    untouched one, and a random arm knocks one in about a fifth of its reach episodes, after which touching
-    it earns -1 in states the critic cannot tell from those where it earns 0. The relative position is
-    redundant but not idle: what every task needs first is the offset from the hand to the named object.
+        The displacement since reset is what lets the observation tell how far an object has moved: reach on an
+        object fails once it was knocked more than 2.5 cm, and push succeeds once its object slid far enough,
+        both measured from where the objects started. Without it, a knocked object at rest looks like an
+        untouched one, and a random arm knocks one in about a fifth of its reach episodes, after which touching
+        it earns -1 in states the critic cannot tell from those where it earns 0. The relative position is
+        redundant but not idle: what every task needs first is the offset from the hand to the named object.
 
-    How far push must slide its object and how high lift must raise it are drawn per episode
-    (``lanrocli.tasks``) and are not observed: the instruction names no distance, so the agent is not
-    told them and has to learn to go past the largest distance or height an episode may draw. For push and
-    lift the reward is therefore not a function of the observation alone.
+        How far push must slide its object and how high lift must raise it are drawn per episode
+        (``lanrocli.tasks``) and are not observed: the instruction names no distance, so the agent is not
+        told them and has to learn to go past the largest distance or height an episode may draw. For push and
+        lift the reward is therefore not a function of the observation alone.
 
-    Episodes start with the end effector at (0, 0, 0.10); ``random_start`` is the share that starts at a
-    random point of the workspace near the table instead, clear of the objects, ``object_start`` (grasp
-    and lift) the share that starts with the open hand around a random object, and ``mistake_start`` the
-    share that starts with the task just done on a wrong object (all for training).
+        Episodes start with the end effector at (0, 0, 0.10); ``random_start`` is the share that starts at a
+        random point of the workspace near the table instead, clear of the objects, ``object_start`` (grasp
+        and lift) the share that starts with the open hand around a random object, and ``mistake_start`` the
+        share that starts with the task just done on a wrong object (all for training).
 
-    ``instruction`` is the current goal sentence (instruction, plus the correction from the step it is
-    spoken) as token ids of ``vocabulary`` (by default the grammar's; an agent's own when one is run),
-    padded with 0. Reward is 0 when the task holds for the goal
-    object, else -1; success ends the episode (terminated), and so does the goal falling off the table
-    (truncated, with ``info["fell"]``: the episode is lost, not merely out of time); another object may
-    fall to the floor and the episode goes on. ``info`` carries
-    ``is_success``, ``achieved`` (per object), ``goal_index``, ``object_positions``, ``objects`` (``ObjectProps``
-    in observation order), ``instruction_text``,
-    ``challenge`` (the ``Kind`` of misunderstanding of a correction episode, or ``None``) and ``correction``
-    (``None`` until spoken).
+        ``instruction`` is the current goal sentence (instruction, plus the correction from the step it is
+        spoken) as token ids of ``vocabulary`` (by default the grammar's; an agent's own when one is run),
+        padded with 0. Reward is 0 when the task holds for the goal
+        object, else -1; success ends the episode (terminated), and so does the goal falling off the table
+        (truncated, with ``info["fell"]``: the episode is lost, not merely out of time); another object may
+        fall to the floor and the episode goes on. ``info`` carries
+        ``is_success``, ``achieved`` (per object), ``goal_index``, ``object_positions``, ``objects`` (``ObjectProps``
+        in observation order), ``instruction_text``,
+        ``challenge`` (the ``Kind`` of misunderstanding of a correction episode, or ``None``), ``correction``
+        (``None`` until spoken), ``referent`` (the object the speaker believes they mean: the goal, except in an
+        instruction correction), ``fits`` (how many objects the instruction may mean to a listener who knows only
+    the common words), ``asked`` (whether this step was a question) and ``answers`` (the instructor's
+        answers so far; see ``step``).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
@@ -145,7 +148,9 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 ),
             }
         )
-        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(action_size(self.task.gripper),), dtype=np.float32)
+        self.arm_actions = action_size(self.task.gripper)
+        asks = 1 if settings.questions else 0
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.arm_actions + asks,), dtype=np.float32)
 
         self.world = World(gui=gui)
         self.robot = Panda(self.world, gripper=self.task.gripper)
@@ -229,21 +234,40 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
                 return
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """One step of the arm, or with ``questions`` and a last action number above 0, a question: the arm
+        holds its last command for ``question_steps`` steps, and the answer is in the observation returned."""
         if self._scene is None:
             raise RuntimeError("call reset() before step()")
-        self.robot.apply_action(np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0))
-        self.world.step()
-        self._steps += 1
-        self._achieved = self._evaluate()
-        # The instructor judges the state this step produced, so a correction is in this very observation.
-        if self.instructor.observe(self.np_random, self._steps, self._achieved):
+        action = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        if action.shape != self.action_space.shape:
+            asks = " and whether to ask (questions)" if self.settings.questions else ""
+            raise ValueError(f"expected an action of size {self.action_space.shape[0]}{asks}, got shape {action.shape}")
+        asks = bool(self.settings.questions and action[-1] > 0.0 and self.instructor.can_answer)
+        if asks:
+            asked_at = self._steps
+            for _ in range(self.settings.question_steps):
+                self._simulate()
+            self.instructor.answer(asked_at)
             self._tokens = self.vocabulary.encode(self.instructor.text)
+        else:
+            self.robot.apply_action(action[: self.arm_actions])
+            self._simulate()
         success = bool(self._achieved[self._scene.goal_index])
         # Truncated, not terminated: ending there must not look like the zero future value of a success.
         self._fell = not success and bool(self.objects.states().positions[self._scene.goal_index, 2] < FALLEN)
         out_of_time = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
         truncated = not success and (out_of_time or self._fell)
-        return self._observation(), reward(success), success, truncated, self._info()
+        penalty = self.settings.question_penalty if asks else 0.0
+        return self._observation(), reward(success) - penalty, success, truncated, self._info(asked=asks)
+
+    def _simulate(self) -> None:
+        """One physics step, judged by the task and then by the instructor, who may speak a correction in
+        the observation of this very step."""
+        self.world.step()
+        self._steps += 1
+        self._achieved = self._evaluate()
+        if self.instructor.observe(self.np_random, self._steps, self._achieved):
+            self._tokens = self.vocabulary.encode(self.instructor.text)
 
     # -- what the agent and the tools see --------------------------------------------------------------
 
@@ -281,7 +305,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         ).astype(np.float32)
         return {"observation": observation, "instruction": self._tokens.copy()}
 
-    def _info(self) -> dict[str, Any]:
+    def _info(self, asked: bool = False) -> dict[str, Any]:
         assert self._scene is not None
         spoken = self.instructor.spoken
         return {
@@ -294,6 +318,10 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             "challenge": self.instructor.challenge,
             "fell": self._fell,
             "correction": None if spoken is None else spoken.as_info(),
+            "asked": asked,
+            "answers": [answer.as_info() for answer in self.instructor.answers],
+            "referent": self.instructor.referent,
+            "fits": self.instructor.fits,
         }
 
     def render(self) -> np.ndarray | None:

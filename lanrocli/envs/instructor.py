@@ -9,6 +9,11 @@ wrongly named object in an instruction correction episode does not end the episo
 With ``max_corrections`` above 1 the dialogue goes on while the arm keeps acting on yet another wrong
 object: each further correction is appended to the sentence and singles out the goal among the candidates
 not ruled out yet, as conversational repair continues until the misunderstanding is resolved.
+
+With ``questions`` the agent may also ask "which one?" before it acts (:meth:`Instructor.answer`). The
+instructor answers honestly from what it believes: words that single out the object it means, appended to the
+sentence as a correction is. In an instruction correction the speaker named the wrong object without knowing
+it, so the answer names that object again and only a correction after the mistake can set the arm right.
 """
 
 from __future__ import annotations
@@ -59,6 +64,10 @@ class InstructorSettings:
     kinds: tuple[Kind, ...] = tuple(Kind)
     max_corrections: int = 1
     """Most corrections in one episode (the paper: 1)."""
+    questions: int = 0
+    """Most questions the agent may ask in one episode. Each answer takes one of the ``max_corrections``
+    places in the sentence, and where corrections are spoken one stays free, so that a correction can
+    always follow an answer."""
     negation_rate: float | None = None
     """``None``: a correction's form is drawn uniformly among the allowed ones, as in the paper (a third are
     negations). A number: the share of corrections that are negations, wherever a negation can single out
@@ -86,6 +95,7 @@ class InstructorSettings:
             raise ValueError(
                 f"max_corrections must be a whole number within [1, {MAX_CORRECTIONS}], got {self.max_corrections!r}"
             )
+        self._check_questions()
         if self.negation_rate is not None:
             if not 0.0 <= self.negation_rate <= 1.0:
                 raise ValueError(f"negation_rate must be within [0, 1], got {self.negation_rate}")
@@ -95,6 +105,18 @@ class InstructorSettings:
                 )
         if self.correction_rate > 0 and not self.active_kinds:
             raise ValueError("kinds=['common_ground'] needs rare_words=True: without rare words there is no such case")
+
+    def _check_questions(self) -> None:
+        if not isinstance(self.questions, (int, np.integer)) or self.questions < 0:
+            raise ValueError(f"questions must be a whole number of at least 0, got {self.questions!r}")
+        free = 1 if self.correction_rate > 0 else 0  # a correction must still fit after the answers
+        if self.questions + free > self.max_corrections:
+            after = ", and one must stay free for a correction after them" if free else ""
+            raise ValueError(
+                f"questions ({self.questions}) need room in the sentence: each answer takes one of max_corrections' "
+                f"({self.max_corrections}) places{after}; raise max_corrections to {self.questions + free} or ask "
+                "fewer questions"
+            )
 
     @property
     def active_kinds(self) -> tuple[Kind, ...]:
@@ -133,6 +155,21 @@ class Correction:
         }
 
 
+@dataclass(frozen=True)
+class Answer:
+    """The instructor's answer to a question, as reported in the environment's ``info["answers"]``."""
+
+    text: str
+    asked_at: int
+    """The step at which the question was asked (0: before the arm's first move)."""
+    referent: int
+    """The object the answer names: the goal, or in an instruction correction the object the speaker
+    believes they meant."""
+
+    def as_info(self) -> dict[str, object]:
+        return {"text": self.text, "asked_at": self.asked_at, "referent": self.referent}
+
+
 @dataclass
 class Instructor:
     """One episode's dialogue. ``start`` plans it; ``observe`` is called after every step."""
@@ -149,6 +186,10 @@ class Instructor:
     instruction_text: str = field(default="", init=False)
     corrections: list[Correction] = field(default_factory=list, init=False)
     """The corrections spoken so far, in order."""
+    answers: list[Answer] = field(default_factory=list, init=False)
+    """The answers given to the agent's questions so far, in order."""
+    _said: list[str] = field(default_factory=list, init=False)  # corrections and answers, in the order spoken
+    _named: int | None = field(default=None, init=False)  # the object an instruction correction names
     _scene: Scene | None = field(default=None, init=False)
     _phrase: Phrase | None = field(default=None, init=False)
     _delay: int = field(default=0, init=False)
@@ -157,6 +198,9 @@ class Instructor:
     _rewording: np.random.Generator | None = field(default=None, init=False)
     """The paraphrase split's own draws, spawned from the episode's stream without advancing it, so its
     episodes and their control (the same seeds in the grammar) differ in the words alone."""
+    _answering: np.random.Generator | None = field(default=None, init=False)
+    """The answers' own draws, spawned like ``_rewording``: an episode with a question meets the same scene,
+    delays and corrections as the same episode without one."""
 
     def __post_init__(self) -> None:
         check_task(self.task)
@@ -169,8 +213,8 @@ class Instructor:
 
     @property
     def text(self) -> str:
-        """The current goal sentence: the instruction, extended by each correction spoken."""
-        return extend(self.instruction_text, *(c.text for c in self.corrections))
+        """The current goal sentence: the instruction, extended by each correction and answer spoken."""
+        return extend(self.instruction_text, *self._said)
 
     def draw_challenge(self, rng: np.random.Generator) -> Kind | None:
         """Whether the next episode is a correction episode, and of which kind (drawn before the scene)."""
@@ -180,12 +224,13 @@ class Instructor:
 
     def start(self, rng: np.random.Generator, scene: Scene, challenge: Kind | None) -> None:
         self._scene, self.challenge, self._trigger = scene, challenge, None
-        self.corrections, self._corrected = [], set()
+        self.corrections, self.answers, self._said, self._corrected = [], [], [], set()
         first, last = self.holdout.delays(self.settings.max_delay, self.split)
         self._delay = int(rng.integers(first, last + 1))
         named = None
         if challenge is Kind.INSTRUCTION_CORRECTION:
             named = pick(rng, [i for i in range(len(scene.objects)) if i != scene.goal_index])
+        self._named = named
         phrases = self.holdout.instruction_phrases(
             opening_phrases(challenge, scene.objects, scene.goal_index, named), self.split
         )
@@ -201,6 +246,44 @@ class Instructor:
             verbs = task_class(self.task).paraphrase_verbs
             if verbs and self._rewording.random() < PARAPHRASE_VERB_RATE:
                 self.instruction_text = instruction(pick(self._rewording, verbs), self._phrase)
+        self._answering = rng.spawn(1)[0] if self.settings.questions else None
+
+    @property
+    def can_answer(self) -> bool:
+        """Whether the agent has a question left in this episode, and the sentence room for its answer."""
+        return len(self.answers) < self.settings.questions and len(self._said) < self.settings.max_corrections
+
+    @property
+    def fits(self) -> int:
+        """How many objects the instruction may mean for a listener who knows only the common words: 1 where
+        it singles one out (an instruction correction's too, though it is the wrong one), more where it is
+        ambiguous or its rare colour word leaves the shape alone to go by."""
+        assert self._scene is not None and self._phrase is not None
+        if self.challenge is None or self.challenge is Kind.INSTRUCTION_CORRECTION:
+            return 1
+        return len(candidates(self.challenge, self._phrase, self._scene.objects))
+
+    @property
+    def referent(self) -> int:
+        """The object the speaker believes they mean: the goal, except in an instruction correction until
+        its correction was spoken (the speaker has seen their mistake by then)."""
+        assert self._scene is not None
+        return self._scene.goal_index if self._named is None or self.corrections else int(self._named)
+
+    def answer(self, step: int) -> Answer:
+        """Answer "which one?" asked at ``step``: "actually the ..." with a phrase that fits the object the
+        speaker means and no other object on the table (that object's full description always does)."""
+        if not self.can_answer:
+            raise RuntimeError(f"no question is left: {self.settings.questions} per episode were asked already")
+        assert self._scene is not None and self._answering is not None
+        objects, referent = self._scene.objects, self.referent
+        everything = set(range(len(objects)))
+        phrases = self.holdout.correction_phrases(naming_phrases(objects, referent, everything), self.split)
+        text = correction(BEGINNING_WORDS[CorrectionForm.EDIT][0], pick(self._answering, phrases))
+        given = Answer(text, step, referent)
+        self.answers.append(given)
+        self._said.append(text)
+        return given
 
     def observe(self, rng: np.random.Generator, step: int, achieved: np.ndarray) -> bool:
         """Watch the state after ``step``; return True when the goal sentence changed at this step."""
@@ -220,7 +303,8 @@ class Instructor:
 
     def _uncorrected_mistakes(self, achieved: np.ndarray) -> list[int]:
         """The wrong objects the task holds for and no correction named yet, where one more may be spoken."""
-        if self.challenge is None or len(self.corrections) >= self.settings.max_corrections or self._scene is None:
+        spoken = len(self.corrections) + len(self.answers)
+        if self.challenge is None or spoken >= self.settings.max_corrections or self._scene is None:
             return []
         return [int(i) for i in np.flatnonzero(achieved) if i != self._scene.goal_index and i not in self._corrected]
 
@@ -229,6 +313,7 @@ class Instructor:
         if self._rewording is not None:
             spoken = self._reworded(spoken, touched)
         self.corrections.append(spoken)
+        self._said.append(spoken.text)
         self._corrected.add(touched)
         self._trigger = None
 
@@ -241,17 +326,11 @@ class Instructor:
             objects, self._scene.goal_index, touched, considered, lambda ps: self.holdout.correction_phrases(ps, None)
         )
         assert self._rewording is not None
-        later = self.settings.max_corrections - len(self.corrections) - 1  # corrections that may follow
+        later = self.settings.max_corrections - len(self._said) - 1  # corrections that may follow
         longest = max_sentence_words(1) - max_sentence_words(0)
         room = None if self.max_words is None else self.max_words - len(self.text.split()) - later * longest
         reworded = paraphrase_correction(self._rewording, spoken.form, referents, room)
         return spoken if reworded is None else replace(spoken, text=reworded[0], phrasing=reworded[1])
-
-    @property
-    def names_goal(self) -> bool:
-        """Whether the goal sentence now singles out the goal for a listener who knows only the common
-        words: always in a plain episode, and once the correction is spoken in a correction episode."""
-        return self.challenge is None or self.spoken is not None
 
     def _form(self, rng: np.random.Generator) -> CorrectionForm:
         rate = self.settings.negation_rate

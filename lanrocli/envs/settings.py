@@ -85,6 +85,25 @@ class EnvSettings:
         ),
     )
 
+    questions: int = field(
+        default=0,
+        metadata=_help(
+            "Most times per episode the agent may ask 'which one?' (0: never). The instructor's answer is "
+            "appended to the sentence and takes one of max_corrections' places; actions then carry one more "
+            "number, which asks when above 0."
+        ),
+    )
+    question_penalty: float = field(
+        default=0.0, metadata=_help("Reward taken off for each question asked (at least 0).")
+    )
+    question_steps: int = field(
+        default=1,
+        metadata=_help(
+            "Steps a question takes: the arm holds still while the episode's clock runs (0: it takes no time; "
+            "then question_penalty must be above 0, so that asking is never free)."
+        ),
+    )
+
     def __post_init__(self) -> None:
         if isinstance(self.objects, bool) or self.objects not in (2, 3):
             raise ValueError(f"objects must be 2 or 3, got {self.objects!r}")
@@ -103,6 +122,15 @@ class EnvSettings:
                 f"object_start must be within [0, 1 - random_start] = [0, {1.0 - self.random_start:g}] (the two "
                 f"shares split the episodes), got {self.object_start}"
             )
+        if not self.question_penalty >= 0.0:
+            raise ValueError(f"question_penalty must be at least 0, got {self.question_penalty}")
+        if isinstance(self.question_steps, bool) or not isinstance(self.question_steps, int) or self.question_steps < 0:
+            raise ValueError(f"question_steps must be a whole number of at least 0, got {self.question_steps!r}")
+        if self.questions and self.question_steps == 0 and self.question_penalty == 0.0:
+            raise ValueError(
+                "a question that takes no step and costs no reward is free, so an agent would ask every time: "
+                "set question_steps above 0 or question_penalty above 0"
+            )
         instructor = self.instructor  # the instructor checks its own settings, across fields too
         object.__setattr__(self, "kinds", None if self.kinds is None else instructor.kinds)
 
@@ -114,6 +142,7 @@ class EnvSettings:
             negation_rate=self.negation_rate,
             max_delay=self.max_delay,
             max_corrections=self.max_corrections,
+            questions=self.questions,
             rare_words=self.rare_words,
             kinds=tuple(Kind) if self.kinds is None else tuple(self.kinds),
         )

@@ -62,6 +62,19 @@ class EpisodeResult:
     that read its sentence from one that moves on to the next object after a wrong one."""
     phrasing: str | None = None
     """The paraphrase the last correction was spoken in (the paraphrase split), None for the grammar's."""
+    answers: tuple[str, ...] = ()
+    """The instructor's answers to the policy's questions, in order: one per question asked."""
+    asked_at: tuple[int, ...] = ()
+    """The step at which each question was asked (0: before the arm's first move)."""
+    wrong_objects: int = 0
+    """How many times the task's condition came to hold for an object other than the goal: the arm acting
+    on an object nobody meant."""
+    fits: int = 1
+    """How many objects the instruction may mean to a listener who knows only the common words."""
+
+    @property
+    def questions(self) -> int:
+        return len(self.answers)
 
     @property
     def corrected(self) -> bool:

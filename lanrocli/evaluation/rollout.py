@@ -80,10 +80,13 @@ class Episode:
     length: int = field(init=False, default=0)
     shares: dict[str, list[float]] = field(init=False, default_factory=dict)
     named_first: bool | None = field(init=False, default=None)
+    wrong_objects: int = field(init=False, default=0)
+    achieved: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
         self.observation, self.info = self.env.reset(seed=self.seed)
         self.target = int(self.info["goal_index"])
+        self.achieved = np.asarray(self.info["achieved"], dtype=bool)
         if self.instruction_shown is Instruction.BLANK:
             self.tokens = np.zeros_like(self.observation["instruction"])
         elif self.instruction_shown is Instruction.OTHER:
@@ -105,9 +108,14 @@ class Episode:
         """Take in what the environment's ``step`` returned for the action chosen on :attr:`shown`; the
         episode's result once it has ended, else None."""
         self.observation, _, terminated, truncated, self.info = outcome
-        achieved = bool(self.info["achieved"][self.target])
-        if self.named_first is None and np.any(self.info["achieved"]):
+        holds = np.asarray(self.info["achieved"], dtype=bool)
+        achieved = bool(holds[self.target])
+        if self.named_first is None and np.any(holds):
             self.named_first = achieved
+        began = holds & ~self.achieved
+        began[self.target] = False
+        self.wrong_objects += int(began.sum())
+        self.achieved = holds
         self.total += reward(achieved)
         self.length += 1
         if self.frames is not None:
@@ -125,6 +133,10 @@ class Episode:
             corrections=0 if correction is None else int(correction["index"]),
             named_first=bool(self.named_first),
             phrasing=None if correction is None else correction.get("phrasing"),
+            answers=tuple(answer["text"] for answer in self.info["answers"]),
+            asked_at=tuple(answer["asked_at"] for answer in self.info["answers"]),
+            wrong_objects=self.wrong_objects,
+            fits=int(self.info["fits"]),
         )
 
 

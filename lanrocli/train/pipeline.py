@@ -249,7 +249,13 @@ class CurriculumRun:
         splits = self.trainer.settings.holdout.splits
         started = time.perf_counter()
         record, figures = measure_stage(
-            folder, self.curriculum.test.episodes, self.trainer.device, final, splits, should_stop
+            folder,
+            self.curriculum.test.episodes,
+            self.trainer.device,
+            final,
+            splits,
+            should_stop,
+            self.curriculum.questions,
         )
         result.test_seconds = round(time.perf_counter() - started, 1)
         write_json(folder / TEST, record)

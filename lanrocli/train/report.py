@@ -13,7 +13,17 @@ from lanrocli.core.choices import Kind
 from lanrocli.evaluation.metrics import ATTENTION, FIGURES, JUDGED, PHASES
 from lanrocli.evaluation.splits import split_lines, with_interval
 from lanrocli.train.clock import RATES
-from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, REPORT, SPLITS, TEST, stage_folder
+from lanrocli.train.runfolder import (
+    BEST,
+    CORRECTION_TEST,
+    LANGUAGE,
+    LAST,
+    QUESTION_TEST,
+    REPORT,
+    SPLITS,
+    TEST,
+    stage_folder,
+)
 from lanrocli.train.runstate import RunState
 
 STATUS = "Status: "
@@ -140,7 +150,48 @@ def _test_lines(tests: dict[int, tuple[str, dict[str, Any]]]) -> list[str]:
     final = next((record for _, record in reversed(tests.values()) if SPLITS in record), None)
     if final:
         lines += split_lines(final[SPLITS], {agent: final[agent] for agent in (LAST, BEST) if agent in final})
+    asked = next((record[QUESTION_TEST] for _, record in reversed(tests.values()) if QUESTION_TEST in record), None)
+    if asked:
+        lines += question_test_lines(asked)
     return lines
+
+
+def question_test_lines(records: dict[str, dict[str, Any]]) -> list[str]:
+    """The section of ``report.md`` on the question test of the final stage's agents (``records`` by agent)."""
+    lines = [
+        "",
+        '## Question test: asking "which one?"',
+        "",
+        "The final agents ask by a rule calibrated on their attention (docs/questions.md), and the same agents "
+        "play the same held-out episodes with questions off. Every episode a correction episode, the kinds "
+        "alike; *clear*: plain and wrong-object episodes, whose instruction singles out the goal. Rates with 95% "
+        "Wilson interval (episodes); wrong-object actions per episode with a 95% interval (total).",
+        "",
+        "| agent | kind | asked | success | success, questions off | wrong-object actions | questions off |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for agent, r in records.items():
+        for kind, figures in r["questions"].items():
+            off = r["questions_off"][kind]
+            lines.append(
+                f"| {agent} | {kind.replace('_', ' ')} | {with_interval(figures['asked'])} | "
+                f"{with_interval(figures['success'])} | {with_interval(off['success'])} | "
+                f"{_per_episode(figures['wrong_objects'])} | {_per_episode(off['wrong_objects'])} |"
+            )
+    lines.append("")
+    for agent, r in records.items():
+        calibration, unasked = r["calibration"], r["acted_without_asking"]
+        lines.append(
+            f"- {agent}: threshold {calibration['threshold']:.4g}, fitted on {calibration['episodes']} scenes to keep "
+            f"the meant object in {100 * calibration['level']:.0f}% of them; kept on the test's scenes: "
+            f"{with_interval(r['coverage'])}; success without a question: {with_interval(unasked)}."
+        )
+    return lines
+
+
+def _per_episode(figure: dict[str, Any]) -> str:
+    low, high = figure["ci"]
+    return f"{figure['per_episode']:.2f} [{low:.2f}, {high:.2f}] ({figure['total']})"
 
 
 def correction_test_lines(records: dict[str, dict[str, Any]]) -> list[str]:

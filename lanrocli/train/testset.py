@@ -21,17 +21,33 @@ from typing import Any
 import torch
 
 from lanrocli.agent.policy import AgentPolicy
+from lanrocli.config.sections import QuestionsConfig
 from lanrocli.core.choices import ActingAttention, Instruction, Split
-from lanrocli.core.seeds import correction_test_seed, held_out_seed, split_test_seed
+from lanrocli.core.seeds import (
+    calibration_seed,
+    correction_test_seed,
+    held_out_seed,
+    question_test_seed,
+    split_test_seed,
+)
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.envs.workers import make_envs
+from lanrocli.evaluation.asking import (
+    AskingPolicy,
+    Calibration,
+    asked_by_fits,
+    calibrate,
+    questions_record,
+    weights_on_meant,
+)
 from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
+from lanrocli.evaluation.metrics import Rate
 from lanrocli.evaluation.quota import CORRECTION_QUOTA, CorrectionQuota, correction_changes
 from lanrocli.evaluation.splits import CONTROL, CONTROLLED, DROP, paired_drops, split_changes
 from lanrocli.language.vocabulary import unlearned_words
 from lanrocli.train.checkpoint import resolve_checkpoint
-from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, SPLITS
+from lanrocli.train.runfolder import BEST, CORRECTION_TEST, LANGUAGE, LAST, QUESTION_TEST, SPLITS
 from lanrocli.train.trainer import TrainSettings, load_policy
 
 
@@ -88,17 +104,9 @@ def _load(
     return _Loaded(directory, settings, policy, env_settings, split)
 
 
-def _run(
-    loaded: _Loaded,
-    episodes: int,
-    first: int,
-    instruction: Instruction = Instruction.TRUE,
-    gif: Path | None = None,
-    progress: Callable[[int], None] | None = None,
-    enough: Callable[[EvaluationReport], bool] | None = None,
-) -> EvaluationReport:
+def _env(loaded: _Loaded, gif: Path | None = None) -> Callable[[], LanroEnv]:
     settings = loaded.settings
-    make_env = functools.partial(
+    return functools.partial(
         LanroEnv,
         settings.task,
         loaded.env,
@@ -108,12 +116,35 @@ def _run(
         holdout=settings.holdout,
         split=loaded.split,
     )
-    envs = make_envs(make_env, SIDE_BY_SIDE, settings.in_workers)
+
+
+def _run(
+    loaded: _Loaded,
+    episodes: int,
+    first: int,
+    instruction: Instruction = Instruction.TRUE,
+    gif: Path | None = None,
+    progress: Callable[[int], None] | None = None,
+    enough: Callable[[EvaluationReport], bool] | None = None,
+    policy: AskingPolicy | None = None,
+) -> EvaluationReport:
+    """``loaded``'s episodes played by its agent, or by ``policy`` (the agent asking questions)."""
+    envs = make_envs(_env(loaded, gif), SIDE_BY_SIDE, loaded.settings.in_workers)
     try:
-        return evaluate(envs, loaded.policy, episodes, first, gif, progress, instruction, enough)
+        return evaluate(envs, policy or loaded.policy, episodes, first, gif, progress, instruction, enough)
     finally:
         for env in envs:
             env.close()
+
+
+def _calibrated(loaded: _Loaded, level: float, episodes: int) -> Calibration:
+    """The rule for asking fitted to ``loaded``'s agent on calibration scenes of its stage."""
+    env = _env(loaded)()
+    try:
+        first = calibration_seed(loaded.settings.seed, loaded.settings.stage)
+        return calibrate(env, loaded.policy, episodes, first, level, SIDE_BY_SIDE)
+    finally:
+        env.close()
 
 
 def _record(
@@ -148,13 +179,20 @@ def measure(
     The environment is the checkpoint's stage as evaluation sees it (neutral starts), changed by
     ``overrides`` (fields of ``EnvSettings``); the episodes are the stage's test episodes unless ``seed`` asks
     for others (episode i then uses ``seed + i``). ``check`` may refuse the resolved settings (raise) before
-    anything runs; ``acting_attention`` replaces the agent's rule for reading the scene as it acts.
+    anything runs; ``acting_attention`` replaces the agent's rule for reading the scene as it acts. With
+    questions in the settings, the agent asks by its calibrated rule (:func:`calibrated_rule`).
     """
     loaded = _load(path, device, lambda _: overrides or {}, check, acting_attention=acting_attention)
     held_out = seed is None
     first = held_out_seed(loaded.settings.seed, loaded.settings.stage) if seed is None else seed
-    report = _run(loaded, episodes, first, instruction, gif, progress)
+    asking = None
+    if loaded.env.questions:
+        calibration = calibrated_rule(path, device)
+        asking = AskingPolicy(loaded.policy, calibration.threshold)
+    report = _run(loaded, episodes, first, instruction, gif, progress, policy=asking)
     record = _record(loaded, {"test_set": held_out, "first_seed": first}, instruction, report)
+    if asking is not None:
+        record |= {"calibration": calibration.as_dict(), "questions": questions_record(report.results)}
     return Measurement(loaded.settings, loaded.env, first, held_out, report, record)
 
 
@@ -219,6 +257,84 @@ def split_test(
     return Measurement(loaded.settings, loaded.env, first, True, report, record)
 
 
+def _asking_episodes(
+    path: Path,
+    device: str | torch.device,
+    test: QuestionsConfig,
+    overrides: Mapping[str, Any] | None = None,
+    check: Callable[[TrainSettings, EnvSettings], None] | None = None,
+) -> _Loaded:
+    """The checkpoint at ``path`` with its last stage as the question test plays it. Where the run's holdout
+    keeps rare colour words out of training, the common-ground episodes speak those, as a person might."""
+    loaded = _load(path, device, lambda _: {**test.changes(), **(overrides or {})}, check)
+    if Split.COMMON_GROUND in loaded.settings.holdout.splits:
+        loaded = replace(loaded, split=Split.COMMON_GROUND)
+    return loaded
+
+
+def calibrated_rule(path: Path, device: str | torch.device = "cpu") -> Calibration:
+    """The rule for asking of the checkpoint at ``path``, calibrated as its question test calibrates it."""
+    test = question_test_settings(path)
+    return _calibrated(_asking_episodes(path, device, test), test.level, test.calibration_episodes)
+
+
+def question_test_settings(path: Path, episodes: int | None = None, level: float | None = None) -> QuestionsConfig:
+    """The question test of the run that ``path`` belongs to (its curriculum's ``questions``, else the
+    defaults), with ``episodes`` and ``level`` changed where given."""
+    from lanrocli.config.curriculum import CurriculumError, load_curriculum
+    from lanrocli.train.runfolder import CONFIG
+
+    try:
+        found = load_curriculum(resolve_checkpoint(path).parent.parent / CONFIG).questions
+    except CurriculumError:
+        found = None
+    changes = {key: value for key, value in (("episodes", episodes), ("level", level)) if value is not None}
+    return QuestionsConfig.model_validate({**(found or QuestionsConfig()).model_dump(), **changes})
+
+
+def question_test(
+    path: Path,
+    test: QuestionsConfig | None = None,
+    device: str | torch.device = "cpu",
+    overrides: Mapping[str, Any] | None = None,
+    progress: Callable[[int], None] | None = None,
+    check: Callable[[TrainSettings, EnvSettings], None] | None = None,
+) -> Measurement:
+    """The checkpoint at ``path`` asking questions by the calibrated rule (:mod:`lanrocli.evaluation.asking`)
+    on held-out episodes of their own, and the same agent on the same episodes with questions off.
+
+    The record is ``measure``'s for the episodes with questions, with ``calibration``; ``coverage``, the
+    share of the test's scenes on which the rule kept the meant object (the level it was fitted to hold);
+    ``questions`` and ``questions_off``, the figures per kind of episode; ``asked_by_fits``; and ``off``,
+    the record of the episodes without questions.
+    """
+    test = test or QuestionsConfig()
+    loaded = _asking_episodes(path, device, test, overrides, check)
+    first = question_test_seed(loaded.settings.seed, loaded.settings.stage)
+    calibration = _calibrated(loaded, test.level, test.calibration_episodes)
+    asking = AskingPolicy(loaded.policy, calibration.threshold)
+    report = _run(loaded, test.episodes, first, progress=progress, policy=asking)
+    off = replace(loaded, env=loaded.env.replace(questions=0))
+    played = _run(off, test.episodes, first, progress=progress)
+    env = _env(loaded)()
+    try:
+        meant = weights_on_meant(env, loaded.policy, test.episodes, first, SIDE_BY_SIDE)
+    finally:
+        env.close()
+    unasked = [r for r in report.results if not r.questions]
+    record = {
+        **_record(loaded, {"question_test": True, "first_seed": first}, Instruction.TRUE, report),
+        "calibration": calibration.as_dict(),
+        "coverage": Rate(len(meant), sum(w > 0.0 and w >= calibration.threshold for w in meant)).as_dict(),
+        "acted_without_asking": Rate(len(unasked), sum(r.success for r in unasked)).as_dict(),
+        "questions": questions_record(report.results),
+        "questions_off": questions_record(played.results),
+        "asked_by_fits": asked_by_fits(report.results),
+        "off": _record(off, {"question_test": True, "first_seed": first}, Instruction.TRUE, played),
+    }
+    return Measurement(loaded.settings, loaded.env, first, True, report, record)
+
+
 # -- a stage's agents --------------------------------------------------------------------------------------
 
 
@@ -234,14 +350,15 @@ def measure_stage(
     final: bool,
     splits: tuple[Split, ...],
     should_stop: Callable[[], bool] = lambda: False,
+    questions: QuestionsConfig | None = None,
 ) -> tuple[dict[str, Any], dict[str, dict[str, float | int | None]]]:
     """The ``test.json`` record of the stage in ``folder`` and its figures by agent: its last and best agents
     on its held-out test episodes, read back from their checkpoints. The run's ``final`` stage also has its
     last agent read a blank and another object's sentence, its agents on the correction test, sized like the
-    test (``CorrectionQuota.scaled``), and on each generalisation split in ``splits``, as many episodes as
-    the test (as many again for a split's control). A stop request is looked at after every episode and
-    raises :class:`TestsStopped`: the tests of a last stage take minutes, longer than a cluster's scheduler
-    waits after it asks a job to stop."""
+    test (``CorrectionQuota.scaled``), on each generalisation split in ``splits``, as many episodes as the
+    test (as many again for a split's control), and with ``questions`` on the question test. A stop request
+    is looked at after every episode and raises :class:`TestsStopped`: the tests of a last stage take
+    minutes, longer than a cluster's scheduler waits after it asks a job to stop."""
 
     def progress(_: int) -> None:
         if should_stop():
@@ -270,6 +387,12 @@ def measure_stage(
             }
             record[SPLITS] = {split: records(by_agent) for split, by_agent in split_tests.items()}
             measured |= {f"{SPLITS}/{split}": by_agent for split, by_agent in split_tests.items()}
+        if questions is not None:
+            asked = once_per_agent(
+                folder, agents, lambda path: question_test(path, questions, device, progress=progress)
+            )
+            record[QUESTION_TEST] = records(asked)
+            measured[QUESTION_TEST] = asked
         for kind, by_name in measured.items():
             figures |= {f"{kind}/{name}": measurement.report.metrics() for name, measurement in by_name.items()}
     return record, figures

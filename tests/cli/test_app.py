@@ -333,7 +333,10 @@ def test_packaged_curricula_by_name_from_any_directory(tmp_path: Path, monkeypat
     for command in (["check", "pushh"], ["train", "pushh"]):
         unknown = runner.invoke(app, command)
         assert unknown.exit_code == 2, unknown.output
-        assert "pushh: no such file" in unknown.output and "grasp, lift, push, quick, reach" in unknown.output
+        assert (
+            "pushh: no such file" in unknown.output
+            and "grasp, lift, push, push-ask, quick, reach, reach-ask" in unknown.output
+        )
     assert not (tmp_path / "checkpoints").exists()
 
 
@@ -459,3 +462,25 @@ def test_eval_correction_test_of_a_checkpoint_and_its_refusals(untrained_checkpo
     # Its stage corrects at most once an episode: a second correction is never spoken there.
     refused = runner.invoke(app, ["eval", str(untrained_checkpoint), "--correction-test", "--second-corrections", "3"])
     assert refused.exit_code == 2 and "never spoken" in refused.output, refused.output
+
+
+def test_eval_question_test_of_a_shipped_agent_and_its_refusals(untrained_checkpoint: Path) -> None:
+    result = runner.invoke(app, ["eval", "push", "--question-test", "--episodes", "8", "--level", "0.9", "--json"])
+    assert result.exit_code == 0, result.output
+    record = json.loads(result.output)
+    assert record["episodes_from"]["question_test"] and record["env"]["questions"] == 1
+    assert record["episodes"] == 8 == record["off"]["episodes"] and record["off"]["env"]["questions"] == 0
+    assert record["calibration"]["level"] == 0.9 and record["coverage"]["episodes"] == 8
+    assert sum(figures["episodes"] for figures in record["questions"].values()) == 8
+    table = runner.invoke(app, ["eval", "push", "--question-test", "--episodes", "4"])
+    words = " ".join(table.output.split())
+    assert table.exit_code == 0 and "question test" in words and "success without a question" in words, words
+    refused = runner.invoke(app, ["eval", "push", "--level", "0.9"])
+    assert refused.exit_code == 2 and "add --question-test" in refused.output
+    refused = runner.invoke(app, ["eval", "oracle", "--question-test"])
+    assert refused.exit_code == 2 and "scripted policy asks none" in refused.output
+    refused = runner.invoke(app, ["eval", "push", "--question-test", "--level", "0.999"])
+    assert refused.exit_code == 2 and "too few" in refused.output, refused.output
+    # Its stage corrects at most once an episode: no room for an answer and a correction after it.
+    refused = runner.invoke(app, ["eval", str(untrained_checkpoint), "--question-test", "--episodes", "2"])
+    assert refused.exit_code == 2 and "raise max_corrections to 2" in refused.output, refused.output

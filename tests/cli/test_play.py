@@ -228,3 +228,26 @@ def test_a_chain_of_corrections_narrows_what_is_left_each_time() -> None:
         2,
     ]
     assert said in Grammar.of("push")
+
+
+def test_the_agent_asks_which_one_and_reads_the_typed_answer() -> None:
+    """The shipped push agent, asked to push "the cube" beside two cubes, asks which one; the answer typed on
+    standard input is appended to the sentence as the instructor's would be, and success is judged on it.
+    A sentence that singles out one object is acted on without a question."""
+    result = play(
+        Path("push"), "push the cube object\nthe blue cube\n\n\n\n\n\n\n\n\n", "--questions", "1", "--seed", "3"
+    )
+    assert result.exit_code == 0, result.output
+    assert "on the table: green cuboid, blue cube, cyan cube" in result.output
+    assert "the agent asks: which one: the blue cube or the cyan cube?" in result.output
+    assert "the agent now reads 'push the cube object the blue cube'" in result.output
+    assert "goal: the blue cube" in result.output and "success" in result.output.splitlines()[-2]
+    clear = play(Path("push"), "push the cyan cube\n\n\n\n\n\n\n\n\n", "--questions", "1", "--seed", "3")
+    assert clear.exit_code == 0, clear.output
+    assert "asks" not in clear.output and "goal: the cyan cube" in clear.output
+
+
+def test_questions_without_room_for_an_answer_are_a_clear_error(checkpoint: Path) -> None:
+    result = play(checkpoint, "push the red cube\n", "--questions", "2")
+    assert result.exit_code == 2
+    assert "raise max_corrections to 2" in result.output

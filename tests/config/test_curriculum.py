@@ -85,6 +85,9 @@ def test_env_section_is_the_environments_settings() -> None:
         "random_start": 0.0,
         "object_start": 0.0,
         "mistake_start": 0.0,
+        "questions": 0,
+        "question_penalty": 0.0,
+        "question_steps": 1,
     }
     assert list(EnvConfig.model_fields) == [f.name for f in dataclasses.fields(EnvSettings)]
 
@@ -613,3 +616,31 @@ SCREENS = sorted((Path(__file__).resolve().parents[2] / "benchmarks" / "screens"
 def test_every_screen_in_benchmarks_is_a_valid_curriculum(path: Path) -> None:
     curriculum = load_curriculum(path)
     assert curriculum.name == path.stem and curriculum.stages
+
+
+OBJECTS = MINIMAL.replace("task: push", "task: push\nagent: {architecture: objects}")
+QUESTIONS = OBJECTS + "    env: {objects: 3, mode: colour_shape, correction_rate: 0.5, max_corrections: 2}\n"
+
+
+def test_a_question_test_loads_with_its_defaults(tmp_path: Path) -> None:
+    curriculum = load_curriculum(write(tmp_path, "c.yaml", QUESTIONS + "questions: {level: 0.9}\n"))
+    assert curriculum.questions is not None
+    assert (curriculum.questions.level, curriculum.questions.episodes, curriculum.questions.steps) == (0.9, 600, 1)
+    assert load_curriculum(write(tmp_path, "plain.yaml", QUESTIONS)).questions is None
+
+
+@pytest.mark.parametrize(
+    "text, line, path, message",
+    [
+        (QUESTIONS + "questions: {penalty: -1}\n", 8, "questions.penalty", "greater than or equal to 0"),
+        (QUESTIONS + "questions: {steps: 0}\n", 8, "questions", "is free"),
+        (QUESTIONS + "questions: {level: 0.99, calibration_episodes: 50}\n", 8, "questions", "at least 100"),
+        (OBJECTS + "questions: {}\n", 7, "questions", "raise max_corrections to 2"),
+        (MINIMAL + "    env: {max_corrections: 2}\nquestions: {}\n", 7, "questions", "architecture: objects"),
+        (MINIMAL + "    env: {max_corrections: 2, questions: 1}\n", 6, "stages[0].env.questions", "not in training"),
+    ],
+)
+def test_bad_question_settings_are_located(tmp_path: Path, text: str, line: int, path: str, message: str) -> None:
+    problem = only_problem(write(tmp_path, "c.yaml", text))
+    assert (problem.line, problem.path) == (line, path), problem
+    assert message in problem.message

@@ -30,6 +30,10 @@ INFO_KEYS = {
     "challenge",
     "correction",
     "fell",
+    "asked",
+    "answers",
+    "referent",
+    "fits",
 }
 
 
@@ -196,6 +200,9 @@ def test_two_environments_do_not_interfere() -> None:
         ({"kinds": ["gossip"]}, "kinds"),
         ({"random_start": -0.1}, "random_start"),
         ({"mistake_start": 1.2}, "mistake_start"),
+        ({"question_penalty": -0.5}, "question_penalty"),
+        ({"question_steps": -1}, "question_steps"),
+        ({"questions": 1, "question_steps": 0}, "free"),
     ],
 )
 def test_bad_settings_raise_clear_errors(kwargs: dict, setting: str) -> None:
@@ -377,3 +384,47 @@ def test_chains_of_corrections_get_room_in_the_sentence() -> None:
     env.close()
     with pytest.raises(ValueError, match="encodes at most 10"):
         LanroEnv("push", objects=3, max_corrections=2, vocabulary=grammar_vocabulary())
+
+
+@pytest.mark.parametrize("steps, penalty", [(3, 0.0), (0, 0.25), (1, 0.5)])
+def test_a_question_costs_what_the_settings_say(steps: int, penalty: float) -> None:
+    """A question holds the arm for ``question_steps`` steps of the episode's clock and takes
+    ``question_penalty`` off the reward; the answer is in the observation returned, and once the episode's
+    questions are spent, the last action number is ignored and the arm moves."""
+    env = LanroEnv(
+        "reach",
+        objects=2,
+        correction_rate=1.0,
+        max_corrections=2,
+        questions=1,
+        question_steps=steps,
+        question_penalty=penalty,
+        max_episode_steps=20,
+    )
+    try:
+        assert env.action_space.shape == (4,)
+        observation, info = env.reset(seed=2)
+        hand = observation["observation"][:3].copy()
+        asking = np.array([1.0, 0.0, 0.0, 1.0])
+        observation, reward, _, _, info = env.step(asking)
+        assert info["asked"] and reward == -1.0 - penalty and env._steps == steps
+        assert np.linalg.norm(observation["instruction"]) > 0 and info["instruction_text"].endswith(
+            info["answers"][0]["text"]
+        )
+        assert info["answers"][0]["asked_at"] == 0
+        assert np.allclose(observation["observation"][:3], hand, atol=0.01)  # the arm held still
+        observation, reward, _, _, info = env.step(asking)
+        assert not info["asked"] and reward == -1.0 and env._steps == steps + 1 and len(info["answers"]) == 1
+        assert observation["observation"][0] > hand[0] + 0.01  # the action's dx moved the hand this time
+    finally:
+        env.close()
+
+
+def test_without_questions_actions_keep_their_size() -> None:
+    env = LanroEnv("push")
+    try:
+        assert env.action_space.shape == (3,)
+        _, info = env.reset(seed=0)
+        assert info["answers"] == [] and not info["asked"]
+    finally:
+        env.close()

@@ -321,3 +321,70 @@ def test_max_corrections_is_checked() -> None:
         InstructorSettings(max_corrections=3)
     with pytest.raises(ValueError, match="max_corrections"):
         InstructorSettings(max_corrections=0)
+
+
+def test_an_answer_singles_out_the_object_the_speaker_means_in_every_kind_of_episode() -> None:
+    """1,000 sampled episodes of every kind, each asked at once: the answer is "actually the ...", and an
+    independent reading of its words against the scene finds exactly one object: the goal, except in an
+    instruction correction, where the speaker believes they meant the object they named."""
+    settings = InstructorSettings(correction_rate=0.8, rare_words=True, max_corrections=2, questions=1)
+    kinds: set[Kind | None] = set()
+    for seed in range(1000):
+        rng = np.random.default_rng(seed)
+        instructor = Instructor("push", settings)
+        challenge = instructor.draw_challenge(rng)
+        objects, goal = sample_objects(
+            rng,
+            Mode.COLOUR_SHAPE,
+            3,
+            need_shared=challenge is Kind.AMBIGUITY,
+            need_same_shape=challenge is Kind.COMMON_GROUND,
+        )
+        scene = Scene(objects, goal, np.zeros((3, 2)))
+        instructor.start(rng, scene, challenge)
+        instruction = instructor.text
+        answer = instructor.answer(0)
+        words = answer.text.split()
+        assert words[:2] == ["actually", "the"] and f"{instruction} {answer.text}" == instructor.text
+        named = parse_object(words[-2:])
+        fitting = {i for i, o in enumerate(objects) if fits(named, o)}
+        said = {i for i, o in enumerate(objects) if fits(parse_object(instruction.split()[-2:]), o)}
+        meant = next(iter(said)) if challenge is Kind.INSTRUCTION_CORRECTION else goal
+        assert fitting == {meant} == {answer.referent}, (seed, challenge, instruction, answer.text)
+        assert (meant != goal) == (challenge is Kind.INSTRUCTION_CORRECTION)
+        assert not instructor.can_answer
+        kinds.add(challenge)
+    assert kinds == {None, *Kind}
+
+
+def test_a_correction_still_follows_an_answer_and_both_take_the_sentence_room() -> None:
+    """An instruction correction asked about: the answer names the wrong object again, the arm acts on it,
+    and the correction after the mistake names the goal; then no more is spoken in a two-place stage."""
+    settings = InstructorSettings(
+        correction_rate=1.0, kinds=(Kind.INSTRUCTION_CORRECTION,), max_corrections=2, questions=1
+    )
+    rng = np.random.default_rng(3)
+    instructor = Instructor("push", settings)
+    objects, goal = sample_objects(rng, Mode.COLOUR_SHAPE, 3)
+    instructor.start(rng, Scene(objects, goal, np.zeros((3, 2))), instructor.draw_challenge(rng))
+    answer = instructor.answer(0)
+    achieved = np.zeros(3, dtype=bool)
+    achieved[answer.referent] = True
+    assert instructor.observe(rng, 4, achieved)
+    spoken = instructor.spoken
+    assert spoken is not None and instructor.text.endswith(f"{answer.text} {spoken.text}")
+    achieved[:] = [i != goal for i in range(3)]
+    assert not any(instructor.observe(rng, step, achieved) for step in range(5, 40))
+
+
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        ({"questions": -1}, "at least 0"),
+        ({"questions": 1, "correction_rate": 0.5}, "one must stay free for a correction"),
+        ({"questions": 2, "max_corrections": 1}, "raise max_corrections to 2"),
+    ],
+)
+def test_questions_without_room_in_the_sentence_are_refused(changes: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        InstructorSettings(**changes)

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from lanrocli.cli.app import app
 from lanrocli.config.curriculum import Curriculum, load_curriculum
-from lanrocli.core.choices import CorrectionForm, Split
+from lanrocli.core.choices import CorrectionForm, Kind, Split
 from lanrocli.core.seeds import correction_test_seed, evaluation_seed, held_out_seed, split_test_seed
 from lanrocli.envs.settings import EnvSettings
 from lanrocli.evaluation.evaluate import EvaluationReport
@@ -372,3 +372,36 @@ def test_a_stop_request_during_the_tests_stops_at_once_and_the_resumed_run_tests
         json.loads((root / "stage-1-third" / TEST).read_text()) for root in (tmp_path / "run", tmp_path / "straight")
     )
     assert again == once
+
+
+@pytest.mark.slow
+def test_a_run_with_a_question_test_stopped_and_resumed_ends_as_an_uninterrupted_one(tmp_path: Path) -> None:
+    """The question test at the end of the run, stopped once during training and once during the tests:
+    the resumed run's test.json, metrics and stages are the uninterrupted run's."""
+    text = tiny(tmp_path).read_text()
+    text = text.replace("agent: {batch_size: 16}", "agent: {batch_size: 16, architecture: objects}")
+    text = text.replace(
+        "negations: true, max_episode_steps: 20}", "negations: true, max_episode_steps: 20, max_corrections: 2}"
+    )
+    path = tmp_path / "ask.yaml"
+    path.write_text(text + "questions: {level: 0.8, calibration_episodes: 10, episodes: 6}\n")
+    plan = load_curriculum(path)
+    straight = CurriculumRun.start(plan, tmp_path / "straight")
+    straight.run()
+    straight.close()
+    cut = CurriculumRun.start(plan, tmp_path / "cut")
+    cut.run(should_stop=lambda: cut.trainer.progress.env_steps >= 50)
+    cut.close()
+    resumed = CurriculumRun.resume(tmp_path / "cut", plan)
+    assert not resumed.run(should_stop=lambda: resumed.state.finished)  # stops in the last stage's tests
+    resumed.close()
+    assert not (tmp_path / "cut" / "stage-3-third" / TEST).exists()
+    again = CurriculumRun.resume(tmp_path / "cut", plan)
+    again.run()
+    again.close()
+    assert outcome(tmp_path / "cut") == outcome(tmp_path / "straight")
+    asked = json.loads((tmp_path / "straight" / "stage-3-third" / TEST).read_text())["question_test"]["last"]
+    assert asked["env"]["questions"] == 1 and set(asked["questions"]) <= {"clear", *(k.value for k in Kind)}
+    assert asked["episodes"] == 6 == asked["off"]["episodes"] and asked["calibration"]["episodes"] == 10
+    report = (tmp_path / "straight" / REPORT).read_text()
+    assert "## Question test" in report and f"| last | {next(iter(asked['questions'])).replace('_', ' ')} |" in report

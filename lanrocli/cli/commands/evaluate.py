@@ -98,6 +98,25 @@ def evaluate_command(
             "stage with chains of corrections), to judge the agent after one. --episodes caps the episodes.",
         ),
     ] = None,
+    question_test: Annotated[
+        bool,
+        typer.Option(
+            "--question-test",
+            help="A trained agent asking 'which one?' by its calibrated rule (docs/questions.md), and the same agent "
+            "with questions off, on held-out episodes of their own: every episode a correction episode of any kind, "
+            "so a quarter are clear. Per kind: episodes with a question, questions per episode, success and "
+            "actions on a wrong object. --episodes sets how many (default 600).",
+        ),
+    ] = False,
+    level: Annotated[
+        float | None,
+        typer.Option(
+            min=0.0,
+            max=1.0,
+            help="With --question-test: the share of scenes on which the rule must keep the meant object (default "
+            "0.97, or the curriculum's questions.level).",
+        ),
+    ] = None,
     split: Annotated[
         Split | None,
         typer.Option(
@@ -152,6 +171,16 @@ def evaluate_command(
         return
     if workers is not None or address is not None:
         raise fail("--workers and --address share a benchmark protocol's episodes; add --protocol")
+    if level is not None and not question_test:
+        raise fail("--level is the calibrated rule's level in the question test; add --question-test")
+    if question_test:
+        if correction_test or split or seed is not None or instruction is not Instruction.TRUE or gif:
+            raise fail(
+                "--question-test runs episodes of its own, with questions and without; leave out --correction-test, "
+                "--split, --seed, --instruction and --gif"
+            )
+        _question_test(what, task, episodes, level, device, changes, as_json)
+        return
     if correction_test and (seed is not None or instruction is not Instruction.TRUE or gif is not None):
         raise fail(
             "--correction-test runs episodes of its own, as the sentence the instructor speaks; leave out "
@@ -311,6 +340,38 @@ def _score(
 
         for line in control_lines(Split(protocol), record):
             Console().print(line, highlight=False, soft_wrap=True)
+
+
+def _question_test(
+    what: str,
+    task: Task | None,
+    episodes: int | None,
+    level: float | None,
+    device: str | None,
+    changes: dict[str, Any],
+    as_json: bool,
+) -> None:
+    """``lanro eval CHECKPOINT --question-test``."""
+    from lanrocli.cli.display.commands import print_questions
+    from lanrocli.train.testset import question_test, question_test_settings
+
+    if what in {p.value for p in PolicyName} or ":" in what:
+        raise fail("--question-test measures a trained agent's questions; a scripted policy asks none")
+    agent = _trained_agent(what)
+    try:
+        test = question_test_settings(agent, episodes=episodes, level=level)
+    except ValueError as error:
+        raise fail(f"{error} (see 'lanro eval --help')") from None
+
+    def run(device: Any, check: Check) -> Measurement:
+        return question_test(agent, test, device, changes, check=check)
+
+    measurement = _measure_checkpoint(agent, task, device, run)
+    if as_json:
+        typer.echo(json.dumps(measurement.record))
+        return
+    title = f"{what} on {measurement.settings.task}, {env_summary(measurement.env)}, question test"
+    print_questions(measurement.record, title)
 
 
 Check = Callable[["TrainSettings", EnvSettings], None]

@@ -9,7 +9,7 @@ import json
 import shlex
 from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from rich.console import Console
 from rich.table import Table
@@ -102,6 +102,51 @@ def print_evaluation(report: EvaluationReport, title: str) -> None:
     if attention is not None:
         shares = ", ".join(f"{phase} {'-' if v is None else f'{v:.2f}'}" for phase, v in attention.items())
         console.print(f"attention on the goal object (mean share over steps): {shares}", highlight=False)
+
+
+def _share(rate: dict[str, Any]) -> str:
+    """A rate as a percentage and its 95% interval, short enough for a narrow terminal."""
+    if not rate["episodes"]:
+        return "-"
+    low, high = rate["ci"]
+    return f"{100 * rate['success']:.1f} ({100 * low:.0f}-{100 * high:.0f})"
+
+
+def _count(figure: dict[str, Any]) -> str:
+    low, high = figure["ci"]
+    return f"{figure['per_episode']:.2f} ({low:.2f}-{high:.2f})"
+
+
+def print_questions(record: dict[str, Any], title: str) -> None:
+    """A question test's figures per kind of episode, with questions and without (``question_test``), each
+    with its 95% interval; ``--json`` has the counts too."""
+    table = Table(title=title)
+    columns = ("kind", "episodes", "asked, %", "questions / ep.", "success, %", "off", "wrong obj. / ep.", "off")
+    for column in columns:
+        table.add_column(column, justify="left" if column == "kind" else "right")
+    off = record["questions_off"]
+    for kind, figures in record["questions"].items():
+        table.add_row(
+            kind.replace("_", " "),
+            str(figures["episodes"]),
+            _share(figures["asked"]),
+            f"{figures['questions']['per_episode']:.2f}",
+            _share(figures["success"]),
+            _share(off[kind]["success"]),
+            _count(figures["wrong_objects"]),
+            _count(off[kind]["wrong_objects"]),
+        )
+    console = Console()
+    console.print(table)
+    calibration, coverage = record["calibration"], record["coverage"]
+    console.print(
+        f"off: the same episodes with questions off. The rule asks unless its attention keeps exactly one object at "
+        f"weight >= {calibration['threshold']:.4f}, fitted on {calibration['episodes']} calibration scenes to keep "
+        f"the meant object in {100 * calibration['level']:.0f}% of them; kept on the test's scenes: "
+        f"{_share(coverage)}; success without a question: {_share(record['acted_without_asking'])} of "
+        f"{record['acted_without_asking']['episodes']}",
+        highlight=False,
+    )
 
 
 def env_summary(env: EnvSettings) -> str:
