@@ -185,14 +185,9 @@ def measure(
     loaded = _load(path, device, lambda _: overrides or {}, check, acting_attention=acting_attention)
     held_out = seed is None
     first = held_out_seed(loaded.settings.seed, loaded.settings.stage) if seed is None else seed
-    asking = None
-    if loaded.env.questions:
-        calibration = calibrated_rule(path, device)
-        asking = AskingPolicy(loaded.policy, calibration.threshold)
+    asking, asked = _asking(loaded, device)
     report = _run(loaded, episodes, first, instruction, gif, progress, policy=asking)
-    record = _record(loaded, {"test_set": held_out, "first_seed": first}, instruction, report)
-    if asking is not None:
-        record |= {"calibration": calibration.as_dict(), "questions": questions_record(report.results)}
+    record = _record(loaded, {"test_set": held_out, "first_seed": first}, instruction, report) | asked(report)
     return Measurement(loaded.settings, loaded.env, first, held_out, report, record)
 
 
@@ -214,16 +209,23 @@ def correction_test(
 
     The episodes come from a seed stream of their own (``correction_test_seed``), so none is an episode of
     training, evaluation or the ordinary test; they and the quota fix where it stops, so the same checkpoint
-    always gives the same record. The record is ``measure``'s with ``quota`` and whether it was met.
+    always gives the same record. The record is ``measure``'s with ``quota`` and whether it was met (and,
+    with questions in ``overrides``, the questions asked by the calibrated rule).
     """
     loaded = _load(path, device, _correction_settings(overrides or {}), check, acting_attention=acting_attention)
     first = correction_test_seed(loaded.settings.seed, loaded.settings.stage)
     negations, chains = loaded.env.negations, loaded.env.max_corrections > 1
     if quota.second and not chains:
         raise ValueError(f"a second correction is never spoken in {path}'s stage: it corrects at most once an episode")
-    report = _run(loaded, quota.episodes, first, progress=progress, enough=lambda r: quota.met(r, negations, chains))
+    asking, asked = _asking(loaded, device)
+
+    def enough(report: EvaluationReport) -> bool:
+        return quota.met(report, negations, chains)
+
+    report = _run(loaded, quota.episodes, first, progress=progress, enough=enough, policy=asking)
     record = {
         **_record(loaded, {"correction_test": True, "first_seed": first}, Instruction.TRUE, report),
+        **asked(report),
         "quota": {**asdict(quota), "negations": quota.negations if negations else 0},
         "quota_met": quota.met(report, negations, chains),
     }
@@ -270,6 +272,20 @@ def _asking_episodes(
     if Split.COMMON_GROUND in loaded.settings.holdout.splits:
         loaded = replace(loaded, split=Split.COMMON_GROUND)
     return loaded
+
+
+def _asking(
+    loaded: _Loaded, device: str | torch.device
+) -> tuple[AskingPolicy | None, Callable[[EvaluationReport], dict[str, Any]]]:
+    """Where ``loaded``'s settings let the agent ask: the agent asking by its calibrated rule, and what a
+    record adds of its questions (the calibration and the figures per kind of episode)."""
+    if not loaded.env.questions:
+        return None, lambda _: {}
+    calibration = calibrated_rule(loaded.directory, device)
+    return AskingPolicy(loaded.policy, calibration.threshold), lambda report: {
+        "calibration": calibration.as_dict(),
+        "questions": questions_record(report.results),
+    }
 
 
 def calibrated_rule(path: Path, device: str | torch.device = "cpu") -> Calibration:

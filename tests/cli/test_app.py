@@ -475,6 +475,12 @@ def test_eval_question_test_of_a_shipped_agent_and_its_refusals(untrained_checkp
     table = runner.invoke(app, ["eval", "push", "--question-test", "--episodes", "4"])
     words = " ".join(table.output.split())
     assert table.exit_code == 0 and "question test" in words and "success without a question" in words, words
+    corrections = runner.invoke(
+        app, ["eval", "push", "--correction-test", "--questions", "1", "--episodes", "4", "--json"]
+    )
+    assert corrections.exit_code == 0, corrections.output
+    record = json.loads(corrections.output)
+    assert record["env"]["questions"] == 1 and "calibration" in record and record["questions"]
     refused = runner.invoke(app, ["eval", "push", "--level", "0.9"])
     assert refused.exit_code == 2 and "add --question-test" in refused.output
     refused = runner.invoke(app, ["eval", "oracle", "--question-test"])
