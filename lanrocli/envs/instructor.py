@@ -190,6 +190,10 @@ class Instructor:
     """The answers given to the agent's questions so far, in order."""
     _said: list[str] = field(default_factory=list, init=False)  # corrections and answers, in the order spoken
     _named: int | None = field(default=None, init=False)  # the object an instruction correction names
+    fits: int = field(default=1, init=False)
+    """How many objects the instruction may mean for a listener who knows only the common words: 1 where it
+    singles one out (an instruction correction's too, though it is the wrong one), more where it is ambiguous
+    or its rare colour word leaves the shape alone to go by."""
     _scene: Scene | None = field(default=None, init=False)
     _phrase: Phrase | None = field(default=None, init=False)
     _delay: int = field(default=0, init=False)
@@ -247,21 +251,13 @@ class Instructor:
             if verbs and self._rewording.random() < PARAPHRASE_VERB_RATE:
                 self.instruction_text = instruction(pick(self._rewording, verbs), self._phrase)
         self._answering = rng.spawn(1)[0] if self.settings.questions else None
+        meant_one = challenge is None or challenge is Kind.INSTRUCTION_CORRECTION
+        self.fits = 1 if meant_one else len(candidates(challenge, self._phrase, scene.objects))
 
     @property
     def can_answer(self) -> bool:
         """Whether the agent has a question left in this episode, and the sentence room for its answer."""
         return len(self.answers) < self.settings.questions and len(self._said) < self.settings.max_corrections
-
-    @property
-    def fits(self) -> int:
-        """How many objects the instruction may mean for a listener who knows only the common words: 1 where
-        it singles one out (an instruction correction's too, though it is the wrong one), more where it is
-        ambiguous or its rare colour word leaves the shape alone to go by."""
-        assert self._scene is not None and self._phrase is not None
-        if self.challenge is None or self.challenge is Kind.INSTRUCTION_CORRECTION:
-            return 1
-        return len(candidates(self.challenge, self._phrase, self._scene.objects))
 
     @property
     def referent(self) -> int:

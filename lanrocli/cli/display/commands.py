@@ -211,6 +211,12 @@ def print_plan(plan: Curriculum) -> None:
     for i, stage in enumerate(plan.stages):
         if (own := plan.evaluation(i)) != plan.eval:
             console.print(f"  stage {i + 1} ({stage.name}) instead: {own.described()} every {own.every:,} steps")
+    if (questions := plan.questions) is not None:
+        console.print(
+            f"question test: the final agents ask by a rule calibrated on {questions.calibration_episodes} scenes to "
+            f"level {questions.level:g}, on {questions.episodes} held-out episodes, and with questions off; a question "
+            f"takes {questions.steps} step(s) and {questions.penalty:g} reward (docs/questions.md)"
+        )
     for name, section in (("agent", plan.agent), ("buffer", plan.buffer)):
         settings = section.settings()
         default = type(settings)()
