@@ -243,12 +243,11 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
             asks = " and whether to ask (questions)" if self.settings.questions else ""
             raise ValueError(f"expected an action of size {self.action_space.shape[0]}{asks}, got shape {action.shape}")
         asks = bool(self.settings.questions and action[-1] > 0.0 and self.instructor.can_answer)
-        if asks:
-            asked_at = self._steps
+        if asks:  # answered at once; the exchange then takes its steps, in which a waiting correction may come
+            self.instructor.answer(self._steps)
+            self._tokens = self.vocabulary.encode(self.instructor.text)
             for _ in range(self.settings.question_steps):
                 self._simulate()
-            self.instructor.answer(asked_at)
-            self._tokens = self.vocabulary.encode(self.instructor.text)
         else:
             self.robot.apply_action(action[: self.arm_actions])
             self._simulate()

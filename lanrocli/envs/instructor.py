@@ -10,7 +10,7 @@ With ``max_corrections`` above 1 the dialogue goes on while the arm keeps acting
 object: each further correction is appended to the sentence and singles out the goal among the candidates
 not ruled out yet, as conversational repair continues until the misunderstanding is resolved.
 
-With ``questions`` the agent may also ask "which one?" before it acts (:meth:`Instructor.answer`). The
+With ``questions`` the agent may also ask "which one?" (:meth:`Instructor.answer`), before it acts or later. The
 instructor answers honestly from what it believes: words that single out the object it means, appended to the
 sentence as a correction is. In an instruction correction the speaker named the wrong object without knowing
 it, so the answer names that object again and only a correction after the mistake can set the arm right.

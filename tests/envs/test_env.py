@@ -428,3 +428,47 @@ def test_without_questions_actions_keep_their_size() -> None:
         assert info["answers"] == [] and not info["asked"]
     finally:
         env.close()
+
+
+class AskingLate:
+    """The mistaken policy, asking at every step: its question may come while a correction waits to be
+    spoken, and the question's steps may bring that correction."""
+
+    def __init__(self) -> None:
+        self.policy = make_policy("mistaken", "reach")
+
+    def reset(self, seed: int | None = None) -> None:
+        self.policy.reset(seed)
+
+    def act(self, observation: dict[str, np.ndarray], info: dict) -> np.ndarray:
+        return np.append(self.policy.act(observation, info), 1.0)
+
+
+def test_a_question_at_every_step_is_answered_once_and_corrections_still_follow() -> None:
+    env = LanroEnv(
+        "reach",
+        objects=3,
+        mode="colour_shape",
+        correction_rate=1.0,
+        max_corrections=2,
+        max_delay=10,
+        questions=1,
+        question_steps=3,
+    )
+    policy = AskingLate()
+    corrected = 0
+    try:
+        for seed in range(12):
+            observation, info = env.reset(seed=seed)
+            policy.reset(seed)
+            done = False
+            while not done:
+                observation, _, terminated, truncated, info = env.step(policy.act(observation, info))
+                done = terminated or truncated
+            (answer,) = info["answers"]  # one question an episode, asked at the first step
+            assert answer["asked_at"] == 0 and answer["text"] in info["instruction_text"]
+            assert len(info["instruction_text"].split()) <= env.vocabulary.max_length
+            corrected += info["correction"] is not None
+        assert corrected >= 6  # the mistaken policy's mistakes are corrected after the answer
+    finally:
+        env.close()
