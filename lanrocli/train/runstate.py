@@ -61,10 +61,10 @@ class RunState:
         """Move on to ``stage``, which starts at ``env_steps`` with no evaluation, rule window or best yet."""
         self.stage, self.stage_start, self.evaluations, self.window, self.best = stage, env_steps, 0, [], None
 
-    def shares(self, result: StageResult) -> dict[str, float] | None:
-        """The share of ``result``'s stage's own time (its wall time and its tests) spent collecting, updating,
-        evaluating, testing, and on the rest (checkpoints, starting environments); None where its clock or its
-        tests' time was not kept."""
+    def seconds(self, result: StageResult) -> dict[str, float] | None:
+        """The seconds of ``result``'s stage spent collecting, updating, evaluating, testing, and on the rest
+        (checkpoints, starting environments), with their ``total``: the stage's own wall time and its tests.
+        None where its clock or its tests' time was not kept."""
         position = self.results.index(result)
         previous = self.results[position - 1] if position > 0 else None
         if result.clock is None or result.test_seconds is None:
@@ -75,15 +75,21 @@ class RunState:
         # a stage's wall time counts from the previous stage's end, whose tests came first
         before = previous.wall_time + previous.test_seconds if previous else 0.0  # type: ignore[operator]
         total = result.wall_time - before + result.test_seconds
-        if total <= 0:
-            return None
         parts = {
             "collection": spent.collection_s,
             "updates": spent.update_s,
             "evaluation": spent.evaluation_s,
             "tests": result.test_seconds,
         }
-        return {**{name: seconds / total for name, seconds in parts.items()}, "rest": 1 - sum(parts.values()) / total}
+        return {**parts, "rest": total - sum(parts.values()), "total": total}
+
+    def shares(self, result: StageResult) -> dict[str, float] | None:
+        """The share of ``result``'s stage's own time spent in each phase of :meth:`seconds`."""
+        seconds = self.seconds(result)
+        if seconds is None or seconds["total"] <= 0:
+            return None
+        total = seconds.pop("total")
+        return {name: value / total for name, value in seconds.items()}
 
     def rates(self, result: StageResult) -> dict[str, float | None] | None:
         """Steps or updates per second of each phase during ``result``'s stage (``PhaseClock.rates``); None
