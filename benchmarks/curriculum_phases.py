@@ -15,6 +15,7 @@ Both runs share the machine with whatever else runs: compare ratios measured in 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import shutil
@@ -51,15 +52,26 @@ def train(rev: str, curriculum: str, seed: int, changes: list[str], scratch: Pat
         subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT, check=False)
 
 
-def stage_seconds(out: Path) -> dict[str, dict[str, float] | None]:
+def stage_seconds(out: Path) -> dict[str, dict[str, float | None] | None]:
     """Per stage of the finished run in ``out``: its phases' seconds, read by this checkout's code, which
-    reads the run folders of earlier versions too."""
+    reads the run folders of earlier versions too. The last stage's checkpoint is written before its tests,
+    so their time is not kept there: that stage's tests are None, and its total leaves them out."""
     from lanrocli.train.runfolder import LATEST, read_pointer
     from lanrocli.train.runstate import RunState
 
     saved = json.loads((read_pointer(out / LATEST) / "state.json").read_text())
     state = RunState.from_dict(saved["extra"]["run"])
-    return {result.name: state.seconds(result) for result in state.results}
+    untested = {r.name for r in state.results if r.test_seconds is None}
+    state.results = [
+        r if r.test_seconds is not None else dataclasses.replace(r, test_seconds=0.0) for r in state.results
+    ]
+    found: dict[str, dict[str, float | None] | None] = {}
+    for result in state.results:
+        seconds: dict[str, float | None] | None = dict(state.seconds(result) or {}) or None
+        if seconds is not None and result.name in untested:
+            seconds["tests"] = None
+        found[result.name] = seconds
+    return found
 
 
 def table(base: dict[str, Any], head: dict[str, Any]) -> list[str]:
@@ -67,11 +79,12 @@ def table(base: dict[str, Any], head: dict[str, Any]) -> list[str]:
     for stage in head["stages"]:
         then, now = base["stages"].get(stage), head["stages"][stage]
         for phase in PHASES:
-            if then is None or now is None:
+            before, after = (None if found is None else found[phase] for found in (then, now))
+            if before is None or after is None:
                 lines.append(f"| {stage} | {phase} | - | - | - |")
                 continue
-            ratio = f"{now[phase] / then[phase]:.2f}" if then[phase] > 0 else "-"
-            lines.append(f"| {stage} | {phase} | {then[phase]:.1f} | {now[phase]:.1f} | {ratio} |")
+            ratio = f"{after / before:.2f}" if before > 0 else "-"
+            lines.append(f"| {stage} | {phase} | {before:.1f} | {after:.1f} | {ratio} |")
     wall = head["wall_seconds"] / base["wall_seconds"]
     lines.append(f"| whole command | wall | {base['wall_seconds']:.1f} | {head['wall_seconds']:.1f} | {wall:.2f} |")
     return lines
