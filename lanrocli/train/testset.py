@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from lanrocli.agent.policy import AgentPolicy
@@ -38,6 +39,7 @@ from lanrocli.evaluation.asking import (
     Calibration,
     asked_by_fits,
     calibrate,
+    kept,
     questions_record,
     weights_on_meant,
 )
@@ -341,7 +343,7 @@ def question_test(
     record = {
         **_record(loaded, {"question_test": True, "first_seed": first}, Instruction.TRUE, report),
         "calibration": calibration.as_dict(),
-        "coverage": Rate(len(meant), sum(w > 0.0 and w >= calibration.threshold for w in meant)).as_dict(),
+        "coverage": Rate(len(meant), int(kept(np.array(meant), calibration.threshold).sum())).as_dict(),
         "acted_without_asking": Rate(len(unasked), sum(r.success for r in unasked)).as_dict(),
         "questions": questions_record(report.results),
         "questions_off": questions_record(played.results),
