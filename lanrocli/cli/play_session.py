@@ -195,7 +195,10 @@ def play(path: Path, options: PlayOptions, stream: TextIO, console: Console) -> 
     if settings.questions:
         from lanrocli.train.testset import calibrated_rule
 
-        threshold = calibrated_rule(agent_path(path), pick_device(options.device)).threshold
+        try:
+            threshold = calibrated_rule(agent_path(path), pick_device(options.device)).threshold
+        except ValueError as error:
+            raise PlayError(f"--questions: the agent's rule for asking cannot be calibrated here: {error}") from None
     try:
         return Session(env, policy, Lines(stream, console), console, options, threshold).run()
     finally:

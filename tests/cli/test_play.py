@@ -247,7 +247,10 @@ def test_the_agent_asks_which_one_and_reads_the_typed_answer() -> None:
     assert "asks" not in clear.output and "goal: the cyan cube" in clear.output
 
 
-def test_questions_without_room_for_an_answer_are_a_clear_error(checkpoint: Path) -> None:
+def test_questions_without_room_for_an_answer_or_a_rule_are_clear_errors(checkpoint: Path) -> None:
     result = play(checkpoint, "push the red cube\n", "--questions", "2")
     assert result.exit_code == 2
     assert "raise max_corrections to 2" in result.output
+    # One question fits its plain stage, but the rule is calibrated on correction episodes, which need two places.
+    result = play(checkpoint, "push the red cube\n", "--questions", "1")
+    assert result.exit_code == 2 and "cannot be calibrated" in result.output, result.output
