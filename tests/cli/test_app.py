@@ -485,6 +485,8 @@ def test_eval_question_test_of_a_shipped_agent_and_its_refusals(untrained_checkp
     assert refused.exit_code == 2 and "add --question-test" in refused.output
     refused = runner.invoke(app, ["eval", "oracle", "--question-test"])
     assert refused.exit_code == 2 and "scripted policy asks none" in refused.output
+    refused = runner.invoke(app, ["eval", "oracle", "--questions", "1"])
+    assert refused.exit_code == 2 and "scripted policies ask none" in refused.output, refused.output
     refused = runner.invoke(app, ["eval", "push", "--question-test", "--level", "0.999"])
     assert refused.exit_code == 2 and "too few" in refused.output, refused.output
     # Its stage corrects at most once an episode: no room for an answer and a correction after it.

@@ -204,6 +204,8 @@ def evaluate_command(
             )
         if instruction is not Instruction.TRUE:
             raise fail("--instruction changes what a trained agent reads; scripted policies read no sentence")
+        if changes.get("questions"):
+            raise fail("--questions lets a trained agent ask by its calibrated rule; scripted policies ask none")
         if acting_attention is not None:
             raise fail(
                 "--acting-attention changes how a trained agent reads the scene; scripted policies attend to nothing"
