@@ -6,9 +6,11 @@ sentence may mean. The rule keeps every object whose weight reaches a threshold 
 leaves other than exactly one object. The threshold is fitted by split conformal prediction on scenes of
 their own (:func:`calibrate`): on a share ``level`` of fresh scenes the object the speaker means keeps its
 place, so an agent that acts without asking acts on the meant object at least that often (in expectation
-over calibration sets), and asks only where its reading is in doubt. An ambiguous sentence spreads the
-attention over the objects it fits and so is asked about; a sentence the agent reads with confidence is not,
-even where the speaker named the wrong object (an instruction correction): no question can reveal that.
+over calibration sets), and asks only where its reading is in doubt. On an ambiguous sentence an agent puts
+most of its attention on the object it guesses, so a fixed threshold would rarely ask (docs/lab); the
+calibrated one is low enough to catch the trace left on the other objects the sentence fits. A sentence read
+without such a trace is not asked about, even where the speaker named the wrong object (an instruction
+correction): no question can reveal that.
 """
 
 from __future__ import annotations
