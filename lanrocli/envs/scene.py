@@ -117,10 +117,10 @@ def sample_positions(
     rng: np.random.Generator, n: int, low: np.ndarray, high: np.ndarray, min_distance: float, max_tries: int = 1000
 ) -> np.ndarray:
     """``n`` points in the rectangle [low, high] no two closer than ``min_distance`` (rejection sampling)."""
+    first, second = np.triu_indices(n, 1)  # every pair once; drawn before the loop, which tries dozens of times
     for _ in range(max_tries):
         points = rng.uniform(low, high, size=(n, 2))
-        gaps = np.linalg.norm(points[:, None, :] - points[None, :, :], axis=-1)
-        if n < 2 or gaps[np.triu_indices(n, 1)].min() >= min_distance:
+        if n < 2 or np.linalg.norm(points[first] - points[second], axis=-1).min() >= min_distance:
             return points
     raise RuntimeError(f"could not place {n} objects {min_distance} m apart in the object area after {max_tries} tries")
 

@@ -91,6 +91,9 @@ class CurriculumRun:
         self.observer = observer or RunObserver()
         self.notes = notes or []
         """What starting or resuming did that the user should know (a start over, a fallback)."""
+        self.workers = 1
+        """Processes that measure the stages' agents (1: this one). No figure depends on it, so a run may
+        resume with another count: it is the machine's, not the plan's."""
         self._lock = lock
         self._tensorboard = TensorBoard.open(out, trainer.progress.env_steps, curriculum.eval.every)
         if trainer.progress.env_steps == 0:
@@ -256,6 +259,7 @@ class CurriculumRun:
             splits,
             should_stop,
             self.curriculum.questions,
+            self.workers,
         )
         result.test_seconds = round(time.perf_counter() - started, 1)
         write_json(folder / TEST, record)

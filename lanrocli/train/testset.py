@@ -33,7 +33,6 @@ from lanrocli.core.seeds import (
 )
 from lanrocli.envs.env import LanroEnv
 from lanrocli.envs.settings import EnvSettings
-from lanrocli.envs.workers import make_envs
 from lanrocli.evaluation.asking import (
     AskingPolicy,
     Calibration,
@@ -43,6 +42,7 @@ from lanrocli.evaluation.asking import (
     questions_record,
     weights_on_meant,
 )
+from lanrocli.evaluation.blocks import Workers, play
 from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
 from lanrocli.evaluation.metrics import Rate
 from lanrocli.evaluation.quota import CORRECTION_QUOTA, CorrectionQuota, correction_changes
@@ -129,11 +129,17 @@ def _run(
     progress: Callable[[int], None] | None = None,
     enough: Callable[[EvaluationReport], bool] | None = None,
     policy: AskingPolicy | None = None,
+    workers: Workers | None = None,
 ) -> EvaluationReport:
-    """``loaded``'s episodes played by its agent, or by ``policy`` (the agent asking questions)."""
-    envs = make_envs(_env(loaded, gif), SIDE_BY_SIDE, loaded.settings.in_workers)
+    """``loaded``'s episodes played by its agent, or by ``policy`` (the agent asking questions), over
+    ``workers`` (default: in this process); a GIF's frames are recorded in this process."""
+    chosen = policy or loaded.policy
+    if gif is None:
+        workers = workers or Workers()
+        return play(workers, workers.source(chosen), _env(loaded), episodes, first, instruction, enough, progress)
+    envs = [_env(loaded, gif)() for _ in range(SIDE_BY_SIDE)]
     try:
-        return evaluate(envs, policy or loaded.policy, episodes, first, gif, progress, instruction, enough)
+        return evaluate(envs, chosen, episodes, first, gif, progress, instruction, enough)
     finally:
         for env in envs:
             env.close()
@@ -175,6 +181,7 @@ def measure(
     progress: Callable[[int], None] | None = None,
     check: Callable[[TrainSettings, EnvSettings], None] | None = None,
     acting_attention: ActingAttention | None = None,
+    workers: Workers | None = None,
 ) -> Measurement:
     """Run the deterministic policy of the checkpoint at ``path`` (a checkpoint, pointer or run folder).
 
@@ -182,13 +189,14 @@ def measure(
     ``overrides`` (fields of ``EnvSettings``); the episodes are the stage's test episodes unless ``seed`` asks
     for others (episode i then uses ``seed + i``). ``check`` may refuse the resolved settings (raise) before
     anything runs; ``acting_attention`` replaces the agent's rule for reading the scene as it acts. With
-    questions in the settings, the agent asks by its calibrated rule (:func:`calibrated_rule`).
+    questions in the settings, the agent asks by its calibrated rule (:func:`calibrated_rule`). ``workers``
+    play the episodes (default: this process), with the same figures however many there are.
     """
     loaded = _load(path, device, lambda _: overrides or {}, check, acting_attention=acting_attention)
     held_out = seed is None
     first = held_out_seed(loaded.settings.seed, loaded.settings.stage) if seed is None else seed
     asking, asked = _asking(loaded, device)
-    report = _run(loaded, episodes, first, instruction, gif, progress, policy=asking)
+    report = _run(loaded, episodes, first, instruction, gif, progress, policy=asking, workers=workers)
     record = _record(loaded, {"test_set": held_out, "first_seed": first}, instruction, report) | asked(report)
     return Measurement(loaded.settings, loaded.env, first, held_out, report, record)
 
@@ -206,6 +214,7 @@ def correction_test(
     progress: Callable[[int], None] | None = None,
     check: Callable[[TrainSettings, EnvSettings], None] | None = None,
     acting_attention: ActingAttention | None = None,
+    workers: Workers | None = None,
 ) -> Measurement:
     """The checkpoint at ``path`` on its stage's correction-test episodes until ``quota`` is met.
 
@@ -224,7 +233,7 @@ def correction_test(
     def enough(report: EvaluationReport) -> bool:
         return quota.met(report, negations, chains)
 
-    report = _run(loaded, quota.episodes, first, progress=progress, enough=enough, policy=asking)
+    report = _run(loaded, quota.episodes, first, progress=progress, enough=enough, policy=asking, workers=workers)
     record = {
         **_record(loaded, {"correction_test": True, "first_seed": first}, Instruction.TRUE, report),
         **asked(report),
@@ -242,20 +251,21 @@ def split_test(
     progress: Callable[[int], None] | None = None,
     check: Callable[[TrainSettings, EnvSettings], None] | None = None,
     acting_attention: ActingAttention | None = None,
+    workers: Workers | None = None,
 ) -> Measurement:
     """The checkpoint at ``path`` on ``episodes`` held-out episodes of one generalisation split of its run's
     holdout, on a seed stream of the split's own; for a split in ``CONTROLLED`` the record's ``control`` is
     the same seeds played with nothing held out."""
     loaded = _load(path, device, split_changes(split), check, split, acting_attention)
     first = split_test_seed(loaded.settings.seed, loaded.settings.stage, split)
-    report = _run(loaded, episodes, first, progress=progress)
+    report = _run(loaded, episodes, first, progress=progress, workers=workers)
     record = {
         **_record(loaded, {"split": split.value, "first_seed": first}, Instruction.TRUE, report),
         "split": split.value,
     }
     if split in CONTROLLED:
         control = replace(loaded, split=None)
-        played = _run(control, episodes, first, progress=progress)
+        played = _run(control, episodes, first, progress=progress, workers=workers)
         record[CONTROL] = _record(control, {"control_of": split.value, "first_seed": first}, Instruction.TRUE, played)
         record[DROP] = paired_drops(split, report.results, played.results)
     return Measurement(loaded.settings, loaded.env, first, True, report, record)
@@ -317,6 +327,7 @@ def question_test(
     overrides: Mapping[str, Any] | None = None,
     progress: Callable[[int], None] | None = None,
     check: Callable[[TrainSettings, EnvSettings], None] | None = None,
+    workers: Workers | None = None,
 ) -> Measurement:
     """The checkpoint at ``path`` asking questions by the calibrated rule (:mod:`lanrocli.evaluation.asking`)
     on held-out episodes of their own, and the same agent on the same episodes with questions off.
@@ -331,9 +342,9 @@ def question_test(
     first = question_test_seed(loaded.settings.seed, loaded.settings.stage)
     calibration = _calibrated(loaded, test.level, test.calibration_episodes)
     asking = AskingPolicy(loaded.policy, calibration.threshold)
-    report = _run(loaded, test.episodes, first, progress=progress, policy=asking)
+    report = _run(loaded, test.episodes, first, progress=progress, policy=asking, workers=workers)
     off = replace(loaded, env=loaded.env.replace(questions=0))
-    played = _run(off, test.episodes, first, progress=progress)
+    played = _run(off, test.episodes, first, progress=progress, workers=workers)
     env = _env(loaded)()
     try:
         meant = weights_on_meant(env, loaded.policy, test.episodes, first, SIDE_BY_SIDE)
@@ -369,62 +380,67 @@ def measure_stage(
     splits: tuple[Split, ...],
     should_stop: Callable[[], bool] = lambda: False,
     questions: QuestionsConfig | None = None,
+    workers: int = 1,
 ) -> tuple[dict[str, Any], dict[str, dict[str, float | int | None]]]:
     """The ``test.json`` record of the stage in ``folder`` and its figures by agent: its last and best agents
     on its held-out test episodes, read back from their checkpoints. The run's ``final`` stage also has its
     last agent read a blank and another object's sentence, its agents on the correction test, sized like the
     test (``CorrectionQuota.scaled``), on each generalisation split in ``splits``, as many episodes as the
-    test (as many again for a split's control), and with ``questions`` on the question test. A stop request
-    is looked at after every episode and raises :class:`TestsStopped`: the tests of a last stage take
+    test (as many again for a split's control), and with ``questions`` on the question test. ``workers``
+    processes share the episodes of every measurement (:mod:`lanrocli.evaluation.blocks`). A stop request
+    is looked at every half second and raises :class:`TestsStopped`: the tests of a last stage take
     minutes, longer than a cluster's scheduler waits after it asks a job to stop."""
 
     def progress(_: int) -> None:
         if should_stop():
             raise TestsStopped(f"stopped while testing the agents of {folder.name}")
 
+    with Workers(workers) as pool:
+        return _measured(folder, episodes, device, final, splits, questions, progress, pool)
+
+
+def _measured(
+    folder: Path,
+    episodes: int,
+    device: str | torch.device,
+    final: bool,
+    splits: tuple[Split, ...],
+    questions: QuestionsConfig | None,
+    progress: Callable[[int], None],
+    pool: Workers,
+) -> tuple[dict[str, Any], dict[str, dict[str, float | int | None]]]:
+    options: dict[str, Any] = {"progress": progress, "workers": pool}
     agents = [name for name in (LAST, BEST) if (folder / name).is_file()]
-    tested = once_per_agent(folder, agents, lambda path: measure(path, episodes, device, progress=progress))
+    tested = once_per_agent(folder, agents, lambda path: measure(path, episodes, device, **options))
     record: dict[str, Any] = records(tested)
     figures = {name: measurement.report.metrics() for name, measurement in tested.items()}
     if final:
         plain = {"correction_rate": 0.0}
         language = {
-            shown.value: measure(folder / LAST, episodes, device, plain, instruction=shown, progress=progress)
+            shown.value: measure(folder / LAST, episodes, device, plain, instruction=shown, **options)
             for shown in Instruction
         }
         record[LANGUAGE] = records(language)
         quota = CORRECTION_QUOTA.scaled(episodes)
-        corrections = once_per_agent(
-            folder, agents, lambda path: correction_test(path, quota, device, progress=progress)
-        )
+        corrections = once_per_agent(folder, agents, lambda path: correction_test(path, quota, device, **options))
         record[CORRECTION_TEST] = records(corrections)
         measured = {LANGUAGE: language, CORRECTION_TEST: corrections}
         if splits:
             split_tests = {
-                split.value: _split_tests(folder, agents, split, episodes, device, progress) for split in splits
+                split.value: once_per_agent(
+                    folder, agents, lambda path, s=split: split_test(path, s, episodes, device, **options)
+                )
+                for split in splits
             }
             record[SPLITS] = {split: records(by_agent) for split, by_agent in split_tests.items()}
             measured |= {f"{SPLITS}/{split}": by_agent for split, by_agent in split_tests.items()}
         if questions is not None:
-            asked = once_per_agent(
-                folder, agents, lambda path: question_test(path, questions, device, progress=progress)
-            )
+            asked = once_per_agent(folder, agents, lambda path: question_test(path, questions, device, **options))
             record[QUESTION_TEST] = records(asked)
             measured[QUESTION_TEST] = asked
         for kind, by_name in measured.items():
             figures |= {f"{kind}/{name}": measurement.report.metrics() for name, measurement in by_name.items()}
     return record, figures
-
-
-def _split_tests(
-    folder: Path,
-    agents: list[str],
-    split: Split,
-    episodes: int,
-    device: str | torch.device,
-    progress: Callable[[int], None],
-) -> dict[str, Measurement]:
-    return once_per_agent(folder, agents, lambda path: split_test(path, split, episodes, device, progress))
 
 
 def once_per_agent(folder: Path, names: list[str], measured: Callable[[Path], Measurement]) -> dict[str, Measurement]:

@@ -218,6 +218,19 @@ def test_eval_table_and_bad_values() -> None:
     assert bad.exit_code == 2 and "object_start is 0.5, but it needs a task with a gripper" in bad.output
 
 
+def test_bad_worker_counts_and_uses_are_refused_before_anything_runs(tmp_path) -> None:
+    for args, words in (
+        (["train", "--quick", "--out", str(tmp_path / "run"), "--workers", "0"], "--workers"),
+        (["eval", "push", "--workers", "0"], "--workers"),
+        (["eval", "push", "--workers", "2", "--gif", str(tmp_path / "a.gif")], "records its frames in this process"),
+        (["eval", "push", "--address", "auto"], "add --protocol"),
+        (["eval", "oracle", "--workers", "2"], "add --protocol"),
+    ):
+        refused = runner.invoke(app, args)
+        assert refused.exit_code == 2 and words in " ".join(refused.output.split()), (args, refused.output)
+    assert not (tmp_path / "run").exists()
+
+
 def test_eval_writes_a_gif(tmp_path) -> None:
     gif = tmp_path / "episodes.gif"
     result = runner.invoke(app, ["eval", "oracle", "--episodes", "1", "--gif", str(gif)])

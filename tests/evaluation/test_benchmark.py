@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import lanrocli
-from lanrocli.evaluation import benchmark
+from lanrocli.evaluation import blocks
 from lanrocli.evaluation.protocols import PROTOCOL_VERSION
 from lanrocli.evaluation.rollout import PolicyError
 from lanrocli.pretrained import agent_path
@@ -114,7 +114,7 @@ def test_several_workers_give_the_numbers_of_one(monkeypatch: pytest.MonkeyPatch
     """A trained agent's batched network, the episodes cut into blocks over two processes: the same
     outcomes, lengths and attention, to the last bit, as one process playing them all."""
     _, agent = load_policy(agent_path(Path("push")))
-    monkeypatch.setattr(benchmark, "CHUNK", 5)
+    monkeypatch.setattr(blocks, "CHUNK", 5)
     one = lanrocli.evaluate(agent, "push", "correction_test", episodes=14)
     two = lanrocli.evaluate(agent, "push", "correction_test", episodes=14, workers=2)
     assert one == two

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import signal
 from collections.abc import Iterator
@@ -16,6 +17,8 @@ from lanrocli.config.curriculum import Curriculum, load_curriculum
 from lanrocli.core.choices import CorrectionForm, Kind, Split
 from lanrocli.core.seeds import correction_test_seed, evaluation_seed, held_out_seed, split_test_seed
 from lanrocli.envs.settings import EnvSettings
+from lanrocli.evaluation import blocks
+from lanrocli.evaluation.blocks import MeasuringError
 from lanrocli.evaluation.evaluate import EvaluationReport
 from lanrocli.evaluation.metrics import EpisodeResult, wilson_interval
 from lanrocli.evaluation.quota import CORRECTION_QUOTA
@@ -405,3 +408,38 @@ def test_a_run_with_a_question_test_stopped_and_resumed_ends_as_an_uninterrupted
     assert asked["episodes"] == 6 == asked["off"]["episodes"] and asked["calibration"]["episodes"] == 10
     report = (tmp_path / "straight" / REPORT).read_text()
     assert "## Question test" in report and f"| last | {next(iter(asked['questions'])).replace('_', ' ')} |" in report
+
+
+def test_a_worker_killed_in_the_tests_is_reported_and_the_resumed_run_tests_as_one_process(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The last stage's tests over two worker processes, one of them killed: the run stops with a
+    MeasuringError and no test.json; resumed, its tests equal those of a run that measured in one process."""
+    monkeypatch.setattr(blocks, "CHUNK", 4)  # ten test episodes make blocks for both workers
+    data = load_curriculum(tiny(tmp_path)).model_dump()
+    data["stages"] = [data["stages"][2]]
+    data["test"] = {"episodes": 10}
+    plan = Curriculum.model_validate(data)
+    killed: list[int] = []
+
+    def kill_a_worker() -> bool:
+        if run.state.finished and not killed:
+            for worker in multiprocessing.active_children():
+                killed.append(worker.pid or 0)
+                os.kill(worker.pid or 0, signal.SIGKILL)
+        return False
+
+    run = CurriculumRun.start(plan, tmp_path / "run")
+    run.workers = 2
+    with pytest.raises(MeasuringError, match="killed, or ran out of memory"):
+        run.run(kill_a_worker)
+    run.close()
+    assert killed and not (tmp_path / "run" / "stage-1-third" / TEST).exists()
+    resumed = CurriculumRun.resume(tmp_path / "run", plan)
+    resumed.workers = 2
+    assert resumed.run()
+    resumed.close()
+    straight = CurriculumRun.start(plan, tmp_path / "straight")
+    assert straight.run()
+    straight.close()
+    assert outcome(tmp_path / "run") == outcome(tmp_path / "straight")

@@ -24,6 +24,7 @@ from lanrocli.evaluation.protocols import PROTOCOLS
 from lanrocli.tasks import Task
 
 if TYPE_CHECKING:
+    from lanrocli.evaluation.blocks import Workers
     from lanrocli.train.testset import Measurement
     from lanrocli.train.trainer import TrainSettings
 
@@ -141,7 +142,11 @@ def evaluate_command(
     ] = None,
     workers: Annotated[
         int | None,
-        typer.Option(min=1, help="With --protocol: processes that share the episodes (default: the machine's cores)."),
+        typer.Option(
+            min=1,
+            help="Processes that share the episodes of a protocol or of a trained agent's measurement (default: the "
+            "cores this process may use); the figures do not depend on it.",
+        ),
     ] = None,
     address: Annotated[
         str | None,
@@ -169,8 +174,13 @@ def evaluate_command(
             )
         _score(what, task, protocol or "test", episodes, device, workers, address, as_json)
         return
-    if workers is not None or address is not None:
-        raise fail("--workers and --address share a benchmark protocol's episodes; add --protocol")
+    if address is not None:
+        raise fail("--address plays a benchmark protocol's episodes on a Ray cluster; add --protocol")
+    if workers is not None and gif is not None:
+        raise fail("--gif records its frames in this process; leave out --workers")
+    if workers is not None and what in {p.value for p in PolicyName}:
+        raise fail("--workers shares the episodes of a protocol or a trained agent; add --protocol")
+    count = workers or len(os.sched_getaffinity(0))
     if level is not None and not question_test:
         raise fail("--level is the calibrated rule's level in the question test; add --question-test")
     if question_test:
@@ -179,7 +189,7 @@ def evaluate_command(
                 "--question-test runs episodes of its own, with questions and without; leave out --correction-test, "
                 "--split, --seed, --instruction and --gif"
             )
-        _question_test(what, task, episodes, level, device, changes, as_json)
+        _question_test(what, task, episodes, level, device, changes, as_json, count)
         return
     if correction_test and (seed is not None or instruction is not Instruction.TRUE or gif is not None):
         raise fail(
@@ -225,7 +235,9 @@ def evaluate_command(
         where = f"seed {first}"
     elif split is not None:
         agent = _trained_agent(what)
-        measurement = _measure_checkpoint(agent, task, device, _split_test(agent, split, episodes, acting_attention))
+        measurement = _measure_checkpoint(
+            agent, task, device, _split_test(agent, split, episodes, acting_attention), count
+        )
         report, record, task_name, env_settings = (
             measurement.report,
             measurement.record,
@@ -236,7 +248,7 @@ def evaluate_command(
     elif correction_test:
         agent = _trained_agent(what)
         measurement = _measure_checkpoint(
-            agent, task, device, _correction_test(agent, changes, episodes, second_corrections, acting_attention)
+            agent, task, device, _correction_test(agent, changes, episodes, second_corrections, acting_attention), count
         )
         report, record, task_name, env_settings = (
             measurement.report,
@@ -252,7 +264,7 @@ def evaluate_command(
     else:
         agent = _trained_agent(what)
         measurement = _measure_checkpoint(
-            agent, task, device, _test(agent, changes, episodes, seed, instruction, gif, acting_attention)
+            agent, task, device, _test(agent, changes, episodes, seed, instruction, gif, acting_attention), count
         )
         report, record, task_name, env_settings = (
             measurement.report,
@@ -352,6 +364,7 @@ def _question_test(
     device: str | None,
     changes: dict[str, Any],
     as_json: bool,
+    workers: int,
 ) -> None:
     """``lanro eval CHECKPOINT --question-test``."""
     from lanrocli.cli.display.commands import print_questions
@@ -365,10 +378,10 @@ def _question_test(
     except ValueError as error:
         raise fail(f"{error} (see 'lanro eval --help')") from None
 
-    def run(device: Any, check: Check) -> Measurement:
-        return question_test(agent, test, device, changes, check=check)
+    def run(device: Any, check: Check, pool: Workers) -> Measurement:
+        return question_test(agent, test, device, changes, check=check, workers=pool)
 
-    measurement = _measure_checkpoint(agent, task, device, run)
+    measurement = _measure_checkpoint(agent, task, device, run, workers)
     if as_json:
         typer.echo(json.dumps(measurement.record))
         return
@@ -377,8 +390,9 @@ def _question_test(
 
 
 Check = Callable[["TrainSettings", EnvSettings], None]
-Measure = Callable[[Any, Check], "Measurement"]
-"""How ``lanro eval`` measures a checkpoint, given the torch device and the check of its settings."""
+Measure = Callable[[Any, Check, "Workers"], "Measurement"]
+"""How ``lanro eval`` measures a checkpoint, given the torch device, the check of its settings and the
+workers that play its episodes."""
 
 
 def _test(
@@ -393,9 +407,11 @@ def _test(
     """The checkpoint at ``path`` on its test episodes, or on others as the options ask."""
     from lanrocli.train.testset import measure
 
-    def run(device: Any, check: Check) -> Measurement:
+    def run(device: Any, check: Check, pool: Workers) -> Measurement:
         count = episodes or _test_episodes(path)
-        return measure(path, count, device, overrides, seed, shown, gif, check=check, acting_attention=acting)
+        return measure(
+            path, count, device, overrides, seed, shown, gif, check=check, acting_attention=acting, workers=pool
+        )
 
     return run
 
@@ -408,13 +424,13 @@ def _correction_test(
     from lanrocli.evaluation.quota import CORRECTION_QUOTA
     from lanrocli.train.testset import correction_test
 
-    def run(device: Any, check: Check) -> Measurement:
+    def run(device: Any, check: Check, pool: Workers) -> Measurement:
         quota = CORRECTION_QUOTA.scaled(_test_episodes(path))
         if episodes is not None:
             quota = dataclasses.replace(quota, episodes=episodes)
         if second is not None:
             quota = dataclasses.replace(quota, second=second)
-        return correction_test(path, quota, device, overrides, check=check, acting_attention=acting)
+        return correction_test(path, quota, device, overrides, check=check, acting_attention=acting, workers=pool)
 
     return run
 
@@ -423,9 +439,9 @@ def _split_test(path: Path, split: Split, episodes: int | None, acting: ActingAt
     """The checkpoint at ``path`` on one generalisation split of its run's holdout."""
     from lanrocli.train.testset import split_test
 
-    def run(device: Any, check: Check) -> Measurement:
+    def run(device: Any, check: Check, pool: Workers) -> Measurement:
         count = episodes or _test_episodes(path)
-        return split_test(path, split, count, device, check=check, acting_attention=acting)
+        return split_test(path, split, count, device, check=check, acting_attention=acting, workers=pool)
 
     return run
 
@@ -441,8 +457,10 @@ def _trained_agent(what: str) -> Path:
         raise fail(f"{error}; or name a scripted policy (oracle, mistaken, random)") from None
 
 
-def _measure_checkpoint(path: Path, task: Task | None, device: str | None, run: Measure) -> Measurement:
-    """The trained agent at ``path`` measured as ``run`` does; every problem is a clear error."""
+def _measure_checkpoint(path: Path, task: Task | None, device: str | None, run: Measure, workers: int) -> Measurement:
+    """The trained agent at ``path`` measured as ``run`` does over ``workers`` processes; every problem is a
+    clear error."""
+    from lanrocli.evaluation.blocks import MeasuringError, Workers
     from lanrocli.train.errors import CheckpointError
     from lanrocli.train.trainer import pick_device
 
@@ -456,7 +474,10 @@ def _measure_checkpoint(path: Path, task: Task | None, device: str | None, run: 
             raise fail(f"{path} observes at most {settings.slots} objects; --objects must not exceed that")
 
     try:
-        return run(pick_device(device), check)
+        with Workers(workers) as pool:
+            return run(pick_device(device), check, pool)
+    except MeasuringError as error:
+        raise fail(str(error), code=1) from None
     except (CheckpointError, KeyError) as error:
         raise fail(f"cannot load a trained agent from {path}: {error}") from None
     except ValueError as error:

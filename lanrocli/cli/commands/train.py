@@ -3,6 +3,7 @@ resumed. A bad curriculum is refused before torch and pybullet load."""
 
 from __future__ import annotations
 
+import os
 import shlex
 from pathlib import Path
 from typing import Annotated
@@ -64,6 +65,15 @@ def train_command(
     device: Annotated[
         str | None, typer.Option(callback=device_option, help="cpu, cuda or cuda:N (default: cuda if available).")
     ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            max=256,
+            help="Processes that measure each stage's agents (default: the cores this process may use). The "
+            "figures do not depend on it; a run may resume with another.",
+        ),
+    ] = None,
     resume: Annotated[bool, typer.Option("--resume", help="Continue the run in --out where it stopped.")] = False,
     source: Annotated[
         Path | None,
@@ -110,6 +120,7 @@ def train_command(
 
     from lanrocli.cli.display.training import TrainingDisplay
     from lanrocli.config.curriculum import CurriculumError
+    from lanrocli.evaluation.blocks import MeasuringError
     from lanrocli.train.branch import branch
     from lanrocli.train.checkpoint import CheckpointWriteError
     from lanrocli.train.errors import RunError
@@ -138,6 +149,7 @@ def train_command(
             run = CurriculumRun.start(plan, out, torch_device, display)
     except (RunError, CurriculumError) as error:
         raise fail(str(error)) from None
+    run.workers = workers or len(os.sched_getaffinity(0))
     for note in run.notes:
         err_console.print(f"[bold yellow]note:[/] {escape(note)}")
     already = run.state.finished  # then running it only completes tests that a stop or a kill interrupted
@@ -155,6 +167,11 @@ def train_command(
                 finished = run.run(should_stop=stop.requested)
         except CheckpointWriteError as error:
             raise fail(f"{error}\nresume with: {resume_hint}", code=1) from None
+        except MeasuringError as error:
+            raise fail(
+                f"{error}. The stage's checkpoint is whole, and a resumed run tests its agents again: {resume_hint}",
+                code=1,
+            ) from None
         except OSError as error:
             raise fail(
                 f"the run stopped: {error}. Its newest checkpoint is whole; "
