@@ -6,7 +6,7 @@ alternating rounds, environment steps per second and the ratios to the first way
   they were cut into blocks, and how training's evaluations still are);
 - ``blocks over N workers``: each worker plays blocks of episodes, policy and environments in one process
   (:mod:`lanrocli.evaluation.blocks`, how runs and ``lanro eval`` measure now). The workers are started and
-  their environments built before the clock starts; what starting them costs is printed apart.
+  started before the clock starts; what starting them costs is printed apart.
 
 Every way gives the same outcomes (the batches are padded to one size), which the script checks.
 
@@ -62,8 +62,8 @@ def main() -> None:
     for count, pool in pools.items():
         source = pool.source(policy)
         started = time.perf_counter()
-        play(pool, source, make, 2 * count * CHUNK, first)  # starts every worker, builds its environments
-        print(f"starting {count} worker(s) and their environments: {time.perf_counter() - started:.1f} s")
+        play(pool, source, make, 2 * count * CHUNK, first)  # starts every worker
+        print(f"starting {count} worker(s): {time.perf_counter() - started:.1f} s")
         ways[f"blocks over {count} worker(s)"] = functools.partial(play, pool, source, make)
 
     rates: dict[str, list[float]] = {way: [] for way in ways}

@@ -2,11 +2,11 @@
 scores a policy.
 
 Measuring is simulation and small forward passes, one core's work per episode, so it spreads over cores by
-episodes: each worker plays a contiguous block of them with a copy of the policy, ``SIDE_BY_SIDE`` at a
-time as one process would, and the results are taken in episode order. A stopping rule therefore stops
-at the episode one process would stop at, and every figure is the same
-(:func:`~lanrocli.evaluation.rollout._decide` pads batches so that a network computes each episode's
-actions alike wherever it runs). The processes are the standard library's pool, or Ray's workers.
+episodes: each worker plays a contiguous block of :data:`CHUNK` of them with a copy of the policy,
+``SIDE_BY_SIDE`` at a time, and the results are taken in episode order. One process plays the very same
+blocks one after another, so a stopping rule stops at the same episode and every figure is the same for
+any number of workers (:func:`_here` says why the blocks must match). The processes are the standard
+library's pool, or Ray's workers.
 """
 
 from __future__ import annotations
@@ -27,16 +27,16 @@ from typing import TYPE_CHECKING, Any
 from lanrocli.core.choices import Instruction
 from lanrocli.envs.workers import leave_signals_to_parent
 from lanrocli.evaluation.adapters import as_policy, load_factory
-from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport, evaluate
+from lanrocli.evaluation.evaluate import SIDE_BY_SIDE, EvaluationReport
 from lanrocli.evaluation.metrics import EpisodeResult
 from lanrocli.evaluation.rollout import run_episodes
 
 if TYPE_CHECKING:
     from lanrocli.envs.env import LanroEnv
 
-CHUNK = 20
-"""Episodes in one block: enough that a worker's round trip is small beside them, few enough that a quota
-is not overshot by much and that a stop request is seen within seconds."""
+CHUNK = 50
+"""Episodes in one block: enough to pay for building its environments, few enough that a quota is not
+overshot by much."""
 
 WAIT_SECONDS = 0.5
 """How often ``progress`` hears from a measurement waiting on its workers."""
@@ -88,7 +88,7 @@ class _RayFuture:
 class Workers:
     """The processes that measurements share: ``count`` of them on this machine (1: this process plays
     every episode itself), or Ray's at ``address``. Open one for many measurements: a worker pays seconds
-    to start (torch, pybullet) and keeps its environments from one block to the next."""
+    to start (torch, pybullet)."""
 
     def __init__(self, count: int = 1, address: str | None = None) -> None:
         if count < 1:
@@ -171,15 +171,6 @@ def _built(pickled: bytes | None, spec: str | None, task: str | None) -> Any:
     return PolicySource(pickled=pickled, spec=spec, task=task).build()
 
 
-@functools.lru_cache(maxsize=1)
-def _environments(made: bytes) -> list[LanroEnv]:
-    """A worker's environments, kept for its next block of the same measurement: building one costs about
-    as much as an episode. Each episode is reset from its own seed, so which environment plays it does not
-    matter."""
-    make_env = pickle.loads(made)
-    return [make_env() for _ in range(SIDE_BY_SIDE)]
-
-
 def _play(
     source: PolicySource, made: bytes, count: int, first: int, origin: int, instruction: Instruction
 ) -> list[EpisodeResult]:
@@ -188,9 +179,28 @@ def _play(
         sys.modules["torch"].set_num_threads(1)
     policy = _built(source.pickled, source.spec, source.task)
     results: list[EpisodeResult] = []
-    envs = _environments(made)
-    run_episodes(envs, policy, count, first, lambda r: results.append(r) is None, instruction, origin=origin)
+    _block(policy, pickle.loads(made), count, first, origin, instruction, lambda r: results.append(r) is None)
     return results
+
+
+def _block(
+    policy: Any,
+    make_env: Callable[[], LanroEnv],
+    count: int,
+    first: int,
+    origin: int,
+    instruction: Instruction,
+    on_result: Callable[[EpisodeResult], bool],
+) -> None:
+    """One block of episodes, in environments built for it: an environment's physics keeps traces of the
+    episodes it played before (PyBullet's state is not all reset with the scene), which now and then
+    changes an outcome, so every block starts from new ones wherever it is played."""
+    envs = [make_env() for _ in range(SIDE_BY_SIDE)]
+    try:
+        run_episodes(envs, policy, count, first, on_result, instruction, origin=origin)
+    finally:
+        for env in envs:
+            env.close()
 
 
 def play(
@@ -209,12 +219,7 @@ def play(
     to stop the measurement. A worker that dies raises :class:`MeasuringError`. One block's episodes are
     played here: a worker would take longer to start than they take."""
     if workers.here or episodes <= CHUNK:
-        envs = [make_env() for _ in range(SIDE_BY_SIDE)]
-        try:
-            return evaluate(envs, source.build(), episodes, first, None, progress, instruction, enough)
-        finally:
-            for env in envs:
-                env.close()
+        return _here(source.build(), make_env, episodes, first, instruction, enough, progress)
     made = pickle.dumps(make_env)
     report = EvaluationReport()
     pending: deque[tuple[Any, int, int]] = deque()
@@ -237,6 +242,34 @@ def play(
     finally:
         for future, _, _ in pending:
             future.cancel()
+
+
+def _here(
+    policy: Any,
+    make_env: Callable[[], LanroEnv],
+    episodes: int,
+    first: int,
+    instruction: Instruction,
+    enough: Callable[[EvaluationReport], bool] | None,
+    progress: Callable[[int], None] | None,
+) -> EvaluationReport:
+    """The episodes played in this process, block after block as workers play them. The blocks must be the
+    same wherever they are played: a batched network's arithmetic for one episode rounds in the last bits
+    by the rows it shares a batch with, and an environment's physics by the episodes it played before
+    (:func:`_block`); either now and then changes an outcome."""
+    report = EvaluationReport()
+
+    def taken(result: EpisodeResult) -> bool:
+        report.results.append(result)
+        if progress is not None:
+            progress(len(report.results))
+        return enough is None or not enough(report)
+
+    for start in range(0, episodes, CHUNK):
+        _block(policy, make_env, min(CHUNK, episodes - start), first + start, first, instruction, taken)
+        if enough is not None and enough(report):
+            break
+    return report
 
 
 def _waited(

@@ -177,8 +177,9 @@ def _decide(
 ) -> list[tuple[np.ndarray, np.ndarray | None]]:
     """Each episode's action and the policy's attention there: one batch for a :class:`BatchPolicy`, else
     each episode asks its own policy. A batch is padded to ``width`` rows (the first repeated), so that a
-    network computes every batch at one size and an episode's actions do not depend on how many others
-    run beside it: side by side, in one process or spread over several, the numbers are the same."""
+    network computes every batch at one size, however many episodes are left. Which episodes share a batch
+    still rounds the last bits of each one's numbers, so measurement plays fixed blocks of episodes
+    (:mod:`lanrocli.evaluation.blocks`)."""
     act_batch = getattr(policies[0], "act_batch", None)
     if act_batch is not None:
         shown = [episode.shown for episode in episodes]
