@@ -136,7 +136,12 @@ def _run(
     chosen = policy or loaded.policy
     if gif is None:
         workers = workers or Workers()
-        return play(workers, workers.source(chosen), _env(loaded), episodes, first, instruction, enough, progress)
+        try:
+            source = workers.source(chosen)
+        except ValueError:  # an agent whose update was compiled does not pickle: this process plays the blocks
+            workers = Workers()
+            source = workers.source(chosen)
+        return play(workers, source, _env(loaded), episodes, first, instruction, enough, progress)
     envs = [_env(loaded, gif)() for _ in range(SIDE_BY_SIDE)]
     try:
         return evaluate(envs, chosen, episodes, first, gif, progress, instruction, enough)
