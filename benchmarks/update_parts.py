@@ -3,6 +3,7 @@ actor's encoders forward and backward, the target critic's forward), on a curric
 sampled from a buffer its last stage's environment filled with random actions.
 
     python benchmarks/update_parts.py --curriculum push [--compile] [--updates 200]
+    python benchmarks/update_parts.py --curriculum push --set agent.share_encoder=true agent.actor_every=2
 
 The batches are sampled once and reused, so the timing holds the update alone: no simulation, no sampling.
 With ``--compile`` the losses are compiled (``SACSettings.compile``); the first updates, which compile, are
@@ -17,6 +18,7 @@ import time
 
 import numpy as np
 import torch
+import yaml
 
 from lanrocli.agent.encoder import distinct_sentences
 from lanrocli.config.curriculum import find_curriculum, load_curriculum
@@ -29,9 +31,14 @@ def main() -> None:
     parser.add_argument("--collect", type=int, default=1500, help="environment steps of random actions first")
     parser.add_argument("--updates", type=int, default=200, help="updates timed")
     parser.add_argument("--compile", action="store_true", help="the losses compiled (SACSettings.compile)")
+    parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="as lanro train --set takes them")
     args = parser.parse_args()
     torch.set_num_threads(1)
+    changes = dict(setting.split("=", 1) for setting in args.set)
     curriculum = load_curriculum(find_curriculum(args.curriculum))
+    curriculum = curriculum.with_settings(
+        {key: yaml.safe_load(value) for key, value in changes.items()}, args.curriculum
+    )
     stage = curriculum.stages[-1]
     agent_settings = dataclasses.replace(curriculum.agent.settings(), compile=args.compile)
     buffer_settings = curriculum.buffer.settings()
@@ -70,7 +77,8 @@ def main() -> None:
 
     s = agent.settings
     print(
-        f"{args.curriculum}'s agent ({s.architecture}, batch {s.batch_size}, compile {s.compile}): "
+        f"{args.curriculum}'s agent ({s.architecture}, batch {s.batch_size}, compile {s.compile}, shared encoder "
+        f"{s.share_encoder}, actor every {s.actor_every} updates): "
         f"{1e3 * update:.2f} ms an update, of which reading the sentences {1e3 * reading:.2f} ms "
         f"({100 * reading / update:.0f}%)"
     )

@@ -86,10 +86,11 @@ def update_tensors(agent: Learner, sampled: SampledTensors) -> UpdateTensors:
 
 
 def sac_losses(
-    agent: Learner, summaries: torch.Tensor, batch: UpdateTensors, labelled: bool
+    agent: Learner, summaries: torch.Tensor, batch: UpdateTensors, labelled: bool, train_actor: bool
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """The sum of the critic's, the actor's, the temperature's and the grounding loss, and the update's
-    metrics in :data:`~lanrocli.agent.settings.UPDATE_METRICS`' order.
+    metrics in :data:`~lanrocli.agent.settings.UPDATE_METRICS`' order; without ``train_actor``, the critic's
+    and its reader's grounding loss alone, and :data:`~lanrocli.agent.settings.CRITIC_METRICS`.
 
     ``summaries`` [encoders, 2B, size]: the critic's, the actor's (unless it shares the critic's) and the
     target critic's readings of this (first B rows) and the next sentences. ``labelled``: whether any row
@@ -121,10 +122,15 @@ def sac_losses(
     critic_scores = actor_scores = None
     if critic.reader is not None and actor.reader is not None:
         critic_scores = critic.reader.scores(batch.obs, critic_language, batch.present)
-        actor_scores = actor.reader.scores(batch.obs, actor_language, batch.present)
+        if train_actor:
+            actor_scores = actor.reader.scores(batch.obs, actor_language, batch.present)
     observed = critic.observe(batch.obs, critic_language, batch.present, critic_scores)
     q = critic.value(observed, batch.action)
     critic_loss = (q - target_q).pow(2).mean(dim=1).sum()
+    if not train_actor:
+        grounding_loss = attention_loss([critic_scores], batch.label, labelled, s.grounding)
+        metrics = [critic_loss, alpha, q.mean(), target_q.mean()]
+        return critic_loss + s.grounding * grounding_loss, torch.stack([metric.detach() for metric in metrics])
 
     # Actor: maximise the critic's value plus entropy. The critic judges the policy's actions in the states it
     # has just read, both held constant, so this loss sends gradient to the actor only.
@@ -132,7 +138,7 @@ def sac_losses(
     q_pi = critic.value(observed.detach(), pi_action, frozen=True).min(dim=0).values
     actor_loss = (alpha * log_prob - q_pi).mean()
 
-    grounding_loss = attention_loss(critic_scores, actor_scores, batch.label, labelled, s.grounding)
+    grounding_loss = attention_loss([critic_scores, actor_scores], batch.label, labelled, s.grounding)
 
     # Temperature: raise alpha when the policy's entropy falls below the target, lower it above. (Without
     # tuning, log_alpha has no gradient and this loss is only reported.)
@@ -143,17 +149,17 @@ def sac_losses(
     return total, torch.stack([metric.detach() for metric in metrics])
 
 
-Losses = Callable[[Learner, torch.Tensor, UpdateTensors, bool], tuple[torch.Tensor, torch.Tensor]]
+Losses = Callable[[Learner, torch.Tensor, UpdateTensors, bool, bool], tuple[torch.Tensor, torch.Tensor]]
 
 
 def compiled_losses() -> Losses:
     """:func:`sac_losses` compiled by ``torch.compile`` for one agent, which must be the only one ever passed to it.
 
     Shapes are fixed (``dynamic=False``): an agent's batches all have the same size; a changed setting (a
-    stage's gamma) or a batch without labels compiles another entry. Its entries are kept apart from any other
-    agent's (``isolate_recompiles``), and they skip the guards on the networks' modules, which never change
-    after an agent is built (their parameters change in place): checking them on every call would cost the
-    update for nothing.
+    stage's gamma), a batch without labels or an update that leaves the actor alone compiles another entry.
+    Its entries are kept apart from any other agent's (``isolate_recompiles``), and they skip the guards on the
+    networks' modules, which never change after an agent is built (their parameters change in place):
+    checking them on every call would cost the update for nothing.
     """
     return torch.compile(
         sac_losses,

@@ -17,6 +17,7 @@ must assemble for each slot separately.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -117,21 +118,19 @@ class SceneReader(nn.Module):
 
 
 def attention_loss(
-    critic_scores: torch.Tensor | None,
-    actor_scores: torch.Tensor | None,
-    label: torch.Tensor,
-    labelled: bool,
-    weight: float,
+    readers: Sequence[torch.Tensor | None], label: torch.Tensor, labelled: bool, weight: float
 ) -> torch.Tensor:
-    """The grounding loss: cross-entropy of the actor's and each critic's attention (logits [members, B,
-    slots]) against the object that a transition's sentence names (``label`` [B], -1 where none is known),
-    averaged over the labelled rows; zero without object-wise readers, with a weight of 0 or without a labelled row
-    (``labelled``, known to the caller without reading ``label``), so that it costs nothing then."""
-    if critic_scores is None or actor_scores is None or weight == 0.0 or not labelled:
-        return torch.zeros((), device=label.device)
+    """The grounding loss: the sum over ``readers`` (each a network's attention logits [members, B, slots]) of
+    the cross-entropy of each member's attention against the object that a transition's sentence names
+    (``label`` [B], -1 where none is known), averaged over the labelled rows; zero without object-wise readers
+    (None), with a weight of 0 or without a labelled row (``labelled``, known to the caller without reading
+    ``label``), so that it costs nothing then."""
     loss = torch.zeros((), device=label.device)
-    for scores in (critic_scores, actor_scores):
-        loss = loss + F.cross_entropy(scores.flatten(0, 1), label.repeat(scores.shape[0]), ignore_index=-1)
+    if weight == 0.0 or not labelled:
+        return loss
+    for scores in readers:
+        if scores is not None:
+            loss = loss + F.cross_entropy(scores.flatten(0, 1), label.repeat(scores.shape[0]), ignore_index=-1)
     return loss
 
 

@@ -27,7 +27,7 @@ from lanrocli.agent.losses import Losses, SampledTensors, compiled_losses, sac_l
 from lanrocli.agent.networks import Actor, Critic, ObjectLayout
 from lanrocli.agent.noise import restore_generator
 from lanrocli.agent.normalizer import RunningNormalizer
-from lanrocli.agent.settings import UPDATE_METRICS, BufferSettings, SACSettings
+from lanrocli.agent.settings import CRITIC_METRICS, UPDATE_METRICS, BufferSettings, SACSettings
 from lanrocli.core.choices import ActingAttention
 
 logger = logging.getLogger(__name__)
@@ -183,8 +183,10 @@ class SACAgent:
 
     def update(self, batch: Batch) -> dict[str, float]:
         """One SAC update of critic, actor and temperature on ``batch`` (:func:`~lanrocli.agent.losses.sac_losses`),
-        then of the target critic. All losses are computed from the parameters as they were before the update
-        and touch disjoint parameters, so one backward pass of their sum and one optimiser step serve all.
+        then of the target critic; the actor and the temperature learn in every ``SACSettings.actor_every``-th
+        update only, and the others report :data:`~lanrocli.agent.settings.CRITIC_METRICS`. All losses are
+        computed from the parameters as they were before the update and touch disjoint parameters, so one
+        backward pass of their sum and one optimiser step serve all.
 
         With ``SACSettings.compile`` the losses are compiled where torch can build their kernels; where it
         cannot (on CPU without a working C++ compiler, say), the update warns once and runs eagerly, drawing
@@ -201,16 +203,20 @@ class SACAgent:
         return self._update(batch, sac_losses)
 
     def _update(self, batch: Batch, losses: Losses) -> dict[str, float]:
+        s = self.settings
+        train_actor = self.updates % s.actor_every == 0
         tokens = torch.as_tensor(np.concatenate([batch.instruction, batch.next_instruction]), device=self.device)
         sentences, inverse = distinct_sentences(tokens.to(torch.int64))
-        *learning, target_encoder = self._update_encoders()
-        with torch.no_grad():
-            target_summaries = target_encoder(sentences)[inverse]
-        summaries = torch.stack([*(encoder(sentences)[inverse] for encoder in learning), target_summaries])
-        loss, metrics = losses(self, summaries, update_tensors(self, self._sampled_tensors(batch)), batch.labelled)
+        summaries = []
+        for encoder in self._update_encoders():
+            # The target's reading never learns; the actor's own only in the updates that train the actor.
+            learns = encoder is self.critic.encoder or (train_actor and encoder is self.actor.encoder)
+            with torch.set_grad_enabled(learns):
+                summaries.append(encoder(sentences)[inverse])
+        tensors = update_tensors(self, self._sampled_tensors(batch))
+        loss, metrics = losses(self, torch.stack(summaries), tensors, batch.labelled, train_actor)
         self.optimizer.zero_grad()
         loss.backward()
-        s = self.settings
         if s.max_grad_norm is not None:
             nn.utils.clip_grad_norm_(self.critic.parameters(), s.max_grad_norm)
             nn.utils.clip_grad_norm_(self.actor.parameters(), s.max_grad_norm)
@@ -219,7 +225,7 @@ class SACAgent:
             for target, online in zip(self.target_critic.parameters(), self.critic.parameters()):
                 target.lerp_(online, 1.0 - s.polyak)
         self.updates += 1
-        return dict(zip(UPDATE_METRICS, metrics.tolist()))
+        return dict(zip(UPDATE_METRICS if train_actor else CRITIC_METRICS, metrics.tolist()))
 
     def _sampled_tensors(self, batch: Batch) -> SampledTensors:
         """The batch as tensors, with the policy's noise for the next states and for these, drawn from the
@@ -259,15 +265,15 @@ class SACAgent:
         sampling: BufferSettings = BufferSettings(),
     ) -> dict[str, float]:
         """``n_updates`` updates on batches sampled (and relabelled) from ``buffer`` as ``sampling`` says;
-        returns the metrics averaged over them."""
+        returns each metric averaged over the updates that reported it."""
         totals: dict[str, float] = {}
-        if n_updates < 1:
-            return totals
+        counts: dict[str, int] = {}
         for _ in range(n_updates):
             batch = buffer.sample(self.settings.batch_size, rng, sampling)
             for name, value in self.update(batch).items():
                 totals[name] = totals.get(name, 0.0) + value
-        return {name: value / n_updates for name, value in totals.items()}
+                counts[name] = counts.get(name, 0) + 1
+        return {name: value / counts[name] for name, value in totals.items()}
 
     # -- state ---------------------------------------------------------------------------------------------
 

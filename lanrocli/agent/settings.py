@@ -22,6 +22,10 @@ UPDATE_METRICS = (
 )
 """The figures each update of the agent reports, in its order; ``metrics.csv`` has a column for each."""
 
+CRITIC_METRICS = ("critic_loss", "alpha", "q_mean", "target_q_mean")
+"""The figures an update that trains the critic alone reports (``SACSettings.actor_every``), in its order; the
+others are averaged over the updates that train the actor."""
+
 
 @dataclass(frozen=True)
 class SACSettings:
@@ -78,6 +82,10 @@ class SACSettings:
     way can be measured the other (``lanro eval --acting-attention``)."""
     share_encoder: bool = False
     """One sentence encoder for actor and critic, trained by the critic's loss only."""
+    actor_every: int = 1
+    """The actor and the temperature learn in every ``actor_every``-th update, the critic in each (the
+    delayed policy updates of TD3 and CrossQ). An update that leaves the actor alone skips its forward and
+    backward pass and, with an encoder of its own, its reading's backward pass."""
     max_grad_norm: float | None = None
     """Clip each network's gradient to this norm; ``None`` leaves gradients as they are."""
     log_std_min: float = -20.0
@@ -127,6 +135,8 @@ class SACSettings:
             raise ValueError("acting_attention: argmax needs architecture 'objects': a flat network has no attention")
         if self.grounding < 0.0:
             raise ValueError(f"grounding must not be negative, got {self.grounding}")
+        if self.actor_every < 1:
+            raise ValueError(f"actor_every must be a positive number of updates, got {self.actor_every}")
         if self.batch_size < 1 or self.hidden_layers < 0:
             raise ValueError("batch_size must be positive and hidden_layers not negative")
 

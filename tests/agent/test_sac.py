@@ -15,7 +15,7 @@ from lanrocli.agent.buffer.replay_buffer import ReplayBuffer
 from lanrocli.agent.buffer.transitions import Batch
 from lanrocli.agent.networks import ObjectLayout
 from lanrocli.agent.sac import SACAgent
-from lanrocli.agent.settings import BufferSettings, SACSettings
+from lanrocli.agent.settings import CRITIC_METRICS, UPDATE_METRICS, BufferSettings, SACSettings
 from lanrocli.core.choices import ActingAttention
 from tests.agent.episodes import ACTION_DIM, OBS_DIM, VOCAB, random_episode
 
@@ -390,6 +390,58 @@ def test_shared_encoder_is_trained_by_the_critic_only() -> None:
     assert {id(p) for p in agent.critic.encoder.parameters()}.isdisjoint(id(p) for p in agent.actor.parameters())
 
 
+def _record_critic_gradients(agent: SACAgent, into: list[list[torch.Tensor]]) -> None:
+    """Make each optimiser step of ``agent`` first append the critic's gradients to ``into``."""
+    step = agent.optimizer.step
+
+    def recorded(*args: object, **kwargs: object) -> object:
+        into.append([torch.zeros_like(p) if p.grad is None else p.grad.clone() for p in agent.critic.parameters()])
+        return step(*args, **kwargs)  # type: ignore[arg-type]
+
+    agent.optimizer.step = recorded  # type: ignore[method-assign,assignment]
+
+
+@pytest.mark.parametrize("share_encoder", [False, True])
+def test_an_update_between_the_actors_trains_the_critic_as_a_whole_update_does(share_encoder: bool) -> None:
+    """With ``actor_every: 2`` the second update leaves the actor, its encoder and the temperature as they
+    were, and gives the critic the gradient a whole update gives it: the losses touch disjoint parameters,
+    so leaving the actor's out changes nothing of the critic's."""
+    rng = np.random.default_rng(0)
+    delayed = _agent(architecture="objects", actor_every=2, share_encoder=share_encoder)
+    delayed.update_normalizer(rng.normal(size=(50, OBS_DIM)))
+    delayed.update(_grounding_batch(rng))
+    assert delayed.updates == 1
+    whole = SACAgent.from_state_dict(delayed.state_dict())
+    whole.settings = dataclasses.replace(whole.settings, actor_every=1)
+    actor_before = [p.clone() for p in delayed.actor.parameters()]
+    alpha_before = delayed.log_alpha.detach().clone()
+    batch = _grounding_batch(rng)
+    critic_grads: list[list[torch.Tensor]] = []
+    for agent in (delayed, whole):
+        _record_critic_gradients(agent, critic_grads)
+        metrics = agent.update(batch)
+        assert set(metrics) == set(UPDATE_METRICS if agent is whole else CRITIC_METRICS)
+    for got, want in zip(*critic_grads, strict=True):
+        torch.testing.assert_close(got, want)
+    assert all(torch.equal(a, b) for a, b in zip(actor_before, delayed.actor.parameters()))
+    assert torch.equal(delayed.log_alpha.detach(), alpha_before)
+    delayed.update(batch)  # the third update trains the actor again
+    assert not all(torch.equal(a, b) for a, b in zip(actor_before, delayed.actor.parameters()))
+
+
+def test_learn_averages_each_metric_over_the_updates_that_report_it() -> None:
+    rng = np.random.default_rng(0)
+    buffer = ReplayBuffer(2000, OBS_DIM, ACTION_DIM, seed=0)
+    for i in range(50):
+        buffer.add_episode(random_episode(rng, i))
+    agent, twin = _agent(batch_size=32, actor_every=2), _agent(batch_size=32, actor_every=2)
+    metrics = agent.learn(buffer, np.random.default_rng(1), n_updates=2)
+    sampling = np.random.default_rng(1)
+    each = [twin.update(buffer.sample(32, sampling, BufferSettings())) for _ in range(2)]
+    assert metrics["actor_loss"] == pytest.approx(each[0]["actor_loss"])
+    assert metrics["critic_loss"] == pytest.approx((each[0]["critic_loss"] + each[1]["critic_loss"]) / 2)
+
+
 def test_learn_samples_relabelled_batches_from_a_buffer() -> None:
     rng = np.random.default_rng(0)
     buffer = ReplayBuffer(2000, OBS_DIM, ACTION_DIM, seed=0)
@@ -413,6 +465,8 @@ def test_settings_reject_nonsense_and_round_trip_as_plain_data() -> None:
         SACSettings(critics=3)
     with pytest.raises(ValueError):
         BufferSettings(relabel_ratio=1.5)
+    with pytest.raises(ValueError, match="actor_every"):
+        SACSettings(actor_every=0)
     settings = SACSettings(critics=2, max_grad_norm=1.0)
     assert SACSettings.from_dict(dataclasses.asdict(settings)) == settings
     with pytest.raises(ValueError, match="unknown"):
