@@ -172,14 +172,19 @@ def _built(pickled: bytes | None, spec: str | None, task: str | None) -> Any:
 
 
 def _play(
-    source: PolicySource, made: bytes, count: int, first: int, origin: int, instruction: Instruction
+    source: PolicySource,
+    make_env: Callable[[], LanroEnv],
+    count: int,
+    first: int,
+    origin: int,
+    instruction: Instruction,
 ) -> list[EpisodeResult]:
     """Episodes ``first`` to ``first + count - 1``, played side by side in a worker."""
     if "torch" in sys.modules:  # the workers share the cores: one thread each, as training's workers
         sys.modules["torch"].set_num_threads(1)
     policy = _built(source.pickled, source.spec, source.task)
     results: list[EpisodeResult] = []
-    _block(policy, pickle.loads(made), count, first, origin, instruction, lambda r: results.append(r) is None)
+    _block(policy, make_env, count, first, origin, instruction, lambda r: results.append(r) is None)
     return results
 
 
@@ -220,7 +225,6 @@ def play(
     played here: a worker would take longer to start than they take."""
     if workers.here or episodes <= CHUNK:
         return _here(source.build(), make_env, episodes, first, instruction, enough, progress)
-    made = pickle.dumps(make_env)
     report = EvaluationReport()
     pending: deque[tuple[Any, int, int]] = deque()
     start = 0
@@ -228,7 +232,9 @@ def play(
         while True:
             while len(pending) < 2 * workers.width and start < episodes:
                 count = min(CHUNK, episodes - start)
-                pending.append((workers.submit(source, made, count, first + start, first, instruction), start, count))
+                pending.append(
+                    (workers.submit(source, make_env, count, first + start, first, instruction), start, count)
+                )
                 start += count
             if not pending:
                 return report

@@ -393,8 +393,9 @@ def measure_stage(
     test (``CorrectionQuota.scaled``), on each generalisation split in ``splits``, as many episodes as the
     test (as many again for a split's control), and with ``questions`` on the question test. ``workers``
     processes share the episodes of every measurement (:mod:`lanrocli.evaluation.blocks`). A stop request
-    is looked at every half second and raises :class:`TestsStopped`: the tests of a last stage take
-    minutes, longer than a cluster's scheduler waits after it asks a job to stop."""
+    raises :class:`TestsStopped`, heard after every episode and, while workers play, at least every half
+    second: the tests of a last stage take minutes, longer than a cluster's scheduler waits after it asks a
+    job to stop."""
 
     def progress(_: int) -> None:
         if should_stop():
