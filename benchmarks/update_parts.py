@@ -64,23 +64,21 @@ def main() -> None:
         agent.update(batch)
     update = (time.perf_counter() - start) / len(batches)
 
-    learning = [encoder for encoder in (agent.critic.encoder, agent.actor.encoder) if encoder is not None]
-    target = None if agent.target_critic is None else agent.target_critic.encoder
+    encoders = agent._update_encoders()
     start = time.perf_counter()
     for batch in batches:
         tokens = torch.as_tensor(np.concatenate([batch.instruction, batch.next_instruction]), dtype=torch.int64)
         sentences, inverse = distinct_sentences(tokens)
-        summaries = torch.stack([encoder(sentences)[inverse] for encoder in learning])
-        if target is not None:
-            with torch.no_grad():
-                target(sentences)
+        summaries = torch.stack([encoder(sentences)[inverse] for encoder in encoders[:-1]])
+        with torch.no_grad():
+            encoders[-1](sentences)
         summaries.sum().backward()
     reading = (time.perf_counter() - start) / len(batches)
 
     s = agent.settings
     print(
         f"{args.curriculum}'s agent ({s.architecture}, batch {s.batch_size}, compile {s.compile}, shared encoder "
-        f"{s.share_encoder}, actor every {s.actor_every} updates, polyak {s.polyak:g}, critic_norm {s.critic_norm}): "
+        f"{s.share_encoder}, actor every {s.actor_every} updates): "
         f"{1e3 * update:.2f} ms an update, of which reading the sentences {1e3 * reading:.2f} ms "
         f"({100 * reading / update:.0f}%)"
     )

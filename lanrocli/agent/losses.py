@@ -25,7 +25,7 @@ class Learner(Protocol):
     settings: SACSettings
     actor: Actor
     critic: Critic
-    target_critic: Critic | None
+    target_critic: Critic
     log_alpha: torch.Tensor
     target_entropy: float
     normalizer: RunningNormalizer
@@ -93,48 +93,40 @@ def sac_losses(
     and its reader's grounding loss alone, and :data:`~lanrocli.agent.settings.CRITIC_METRICS`.
 
     ``summaries`` [encoders, 2B, size]: the critic's, the actor's (unless it shares the critic's) and the
-    target critic's (if the agent keeps one) readings of this (first B rows) and the next sentences.
-    ``labelled``: whether any row has a ``label``. All losses are computed from the parameters as they are
-    before the update, as the original SAC does; they touch disjoint parameters, so one backward pass of the
-    sum gives every network its gradient.
+    target critic's readings of this (first B rows) and the next sentences. ``labelled``: whether any row
+    has a ``label``. All losses are computed from the parameters as they are before the update, as the
+    original SAC does; they touch disjoint parameters, so one backward pass of the sum gives every network
+    its gradient.
     """
     s, actor, critic = agent.settings, agent.actor, agent.critic
     rows = batch.reward.shape[0]
     alpha = agent.log_alpha.detach().exp()
+    critic_language = summaries[0, :rows]
+    next_target_language = summaries[-1, rows:].detach()
     # A shared encoder learns from the critic's loss alone: the actor reads its summary detached.
     actor_language, next_actor_language = (summaries[1] if actor.encoder is not None else summaries[0].detach()).chunk(
         2
     )
+
+    # Critic: regress on the soft Bellman target of the target critic and the current policy.
     with torch.no_grad():
         next_action, next_log_prob = actor.sample(
             batch.next_obs, next_actor_language, batch.next_noise, batch.next_present
         )
-
-    # The critic reads this batch's states; without a target critic, the next states too, in the same pass.
-    # Object-wise readers weigh the objects once per network: the same attention serves the networks and the
-    # grounding loss.
-    joint = agent.target_critic is None
-    states = torch.cat([batch.obs, batch.next_obs]) if joint else batch.obs
-    present = _joined(batch.present, batch.next_present) if joint else batch.present
-    critic_language = summaries[0] if joint else summaries[0, :rows]
-    critic_scores = None if critic.reader is None else critic.reader.scores(states, critic_language, present)
-    observed = critic.observe(states, critic_language, present, critic_scores)
-
-    # Critic: regress on the soft Bellman target of the target critic (or of its own values of the next
-    # states, held constant) and the current policy.
-    if joint:
-        q, next_q = critic.value(observed, torch.cat([batch.action, next_action])).split(rows, dim=1)
-    else:
-        q = critic.value(observed, batch.action)
-        with torch.no_grad():
-            next_q = agent.target_critic(batch.next_obs, summaries[-1, rows:], next_action, batch.next_present)
-    with torch.no_grad():
-        soft_value = next_q.min(dim=0).values - alpha * next_log_prob
-        target_q = batch.reward + s.gamma * batch.not_done * soft_value
+        next_q = agent.target_critic(batch.next_obs, next_target_language, next_action, batch.next_present)
+        target_q = batch.reward + s.gamma * batch.not_done * (next_q.min(dim=0).values - alpha * next_log_prob)
         if s.clip_target:
             target_q = target_q.clamp(FAILURE_REWARD / (1.0 - s.gamma), SUCCESS_REWARD)
+    # Object-wise readers weigh the objects once per network: the same attention serves the networks and the
+    # grounding loss.
+    critic_scores = actor_scores = None
+    if critic.reader is not None and actor.reader is not None:
+        critic_scores = critic.reader.scores(batch.obs, critic_language, batch.present)
+        if train_actor:
+            actor_scores = actor.reader.scores(batch.obs, actor_language, batch.present)
+    observed = critic.observe(batch.obs, critic_language, batch.present, critic_scores)
+    q = critic.value(observed, batch.action)
     critic_loss = (q - target_q).pow(2).mean(dim=1).sum()
-    critic_scores = None if critic_scores is None else critic_scores[:, :rows]
     if not train_actor:
         grounding_loss = attention_loss([critic_scores], batch.label, labelled, s.grounding)
         metrics = [critic_loss, alpha, q.mean(), target_q.mean()]
@@ -142,9 +134,8 @@ def sac_losses(
 
     # Actor: maximise the critic's value plus entropy. The critic judges the policy's actions in the states it
     # has just read, both held constant, so this loss sends gradient to the actor only.
-    actor_scores = None if actor.reader is None else actor.reader.scores(batch.obs, actor_language, batch.present)
     pi_action, log_prob = actor.sample(batch.obs, actor_language, batch.noise, batch.present, actor_scores)
-    q_pi = critic.value(observed[:, :rows].detach(), pi_action, frozen=True).min(dim=0).values
+    q_pi = critic.value(observed.detach(), pi_action, frozen=True).min(dim=0).values
     actor_loss = (alpha * log_prob - q_pi).mean()
 
     grounding_loss = attention_loss([critic_scores, actor_scores], batch.label, labelled, s.grounding)
@@ -159,10 +150,6 @@ def sac_losses(
 
 
 Losses = Callable[[Learner, torch.Tensor, UpdateTensors, bool, bool], tuple[torch.Tensor, torch.Tensor]]
-
-
-def _joined(present: torch.Tensor | None, next_present: torch.Tensor | None) -> torch.Tensor | None:
-    return None if present is None or next_present is None else torch.cat([present, next_present])
 
 
 def compiled_losses() -> Losses:

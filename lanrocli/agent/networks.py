@@ -224,8 +224,7 @@ class Critic(nn.Module):
 
     Each member has its own observation layer and hidden layers; they read the same sentence summary, from
     the critic's ``encoder``. With a ``layout`` each member has its own :class:`SceneReader` and reads the
-    arm and the object the sentence names (see the module's docstring). With ``batch_norm`` each hidden
-    activation's input is normalised over the batch (``SACSettings.critic_norm``).
+    arm and the object the sentence names (see the module's docstring).
     """
 
     def __init__(
@@ -239,7 +238,6 @@ class Critic(nn.Module):
         n_critics: int,
         layout: ObjectLayout | None = None,
         sentence_in_trunk: bool = True,
-        batch_norm: bool = False,
     ) -> None:
         super().__init__()
         self.encoder = encoder
@@ -253,9 +251,6 @@ class Critic(nn.Module):
             layers += [EnsembleLinear(n_critics, input_size, hidden_size), nn.ReLU()]
             input_size = hidden_size
         self.body = nn.Sequential(*layers)
-        # No running statistics: the critic is read in updates alone, each read normalised over the rows it judges.
-        norms = [nn.BatchNorm1d(n_critics * hidden_size, track_running_stats=False) for _ in range(depth * batch_norm)]
-        self.norms = nn.ModuleList(norms)
         self.q = EnsembleLinear(n_critics, input_size, 1)
         self.n_critics = n_critics
         self.action_dim = action_dim
@@ -303,26 +298,14 @@ class Critic(nn.Module):
         h = torch.baddbmm(
             observed, action.expand(self.n_critics, -1, -1), weights(self._first_layer())[0][:, -self.action_dim :]
         )
-        norms = iter(self.norms)
         if len(self.body) > 0:  # the first layer was the body's; the rest of the body and the output follow
             for layer in [*self.body[1:], self.q]:
                 if isinstance(layer, EnsembleLinear):
                     weight, bias = weights(layer)
                     h = torch.baddbmm(bias, h, weight)
-                else:  # an activation, after the normalisation of its input where the critic has one
-                    norm = next(norms, None)
-                    h = layer(h if norm is None else self._normalise(norm, h, frozen))
+                else:
+                    h = layer(h)
         return h.squeeze(2)
-
-    @staticmethod
-    def _normalise(norm: nn.BatchNorm1d, h: torch.Tensor, frozen: bool) -> torch.Tensor:
-        """``h`` [members, B, width] normalised per member and unit over the batch by ``norm`` (which holds
-        ``members * width`` units); ``frozen``: with its scale and shift held constant."""
-        members, rows, width = h.shape
-        flat = h.transpose(0, 1).reshape(rows, members * width)
-        weight, bias = (norm.weight.detach(), norm.bias.detach()) if frozen else (norm.weight, norm.bias)
-        flat = F.batch_norm(flat, None, None, weight, bias, training=True, eps=norm.eps)
-        return flat.reshape(rows, members, width).transpose(0, 1)
 
     def _first_layer(self) -> EnsembleLinear:
         """The layer that reads the observation's features, the sentence and the action together."""

@@ -98,9 +98,8 @@ class SACAgent:
                 s.critics,
                 self.layout,
                 s.sentence_in_trunk,
-                s.critic_norm,
             ).to(self.device)
-        self.target_critic = None if s.polyak == 0.0 else copy.deepcopy(self.critic).requires_grad_(False)
+        self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
         # The layout serves the normaliser whatever the architecture: objects share statistics across slots.
         observed = layout if layout is not None else ObjectLayout(obs_dim, 0, 0)
         self.normalizer = RunningNormalizer(observed, s.obs_clip, s.obs_var_eps).to(self.device)
@@ -222,10 +221,9 @@ class SACAgent:
             nn.utils.clip_grad_norm_(self.critic.parameters(), s.max_grad_norm)
             nn.utils.clip_grad_norm_(self.actor.parameters(), s.max_grad_norm)
         self.optimizer.step()
-        if self.target_critic is not None:
-            with torch.no_grad():
-                for target, online in zip(self.target_critic.parameters(), self.critic.parameters()):
-                    target.lerp_(online, 1.0 - s.polyak)
+        with torch.no_grad():
+            for target, online in zip(self.target_critic.parameters(), self.critic.parameters()):
+                target.lerp_(online, 1.0 - s.polyak)
         self.updates += 1
         return dict(zip(UPDATE_METRICS if train_actor else CRITIC_METRICS, metrics.tolist()))
 
@@ -252,11 +250,11 @@ class SACAgent:
 
     def _update_encoders(self) -> list[LanguageEncoder]:
         """The encoders an update reads the sentences with, in the order :func:`sac_losses` takes their
-        summaries: the critic's, the actor's own (if it has one), the target critic's (if there is one)."""
+        summaries: the critic's, the actor's own (if it has one), the target critic's."""
         return [
             self.critic.encoder,
             *([self.actor.encoder] if self.actor.encoder is not None else []),
-            *([self.target_critic.encoder] if self.target_critic is not None else []),
+            self.target_critic.encoder,
         ]
 
     def learn(
@@ -290,7 +288,7 @@ class SACAgent:
             "settings": self.settings.to_dict(),
             "actor": self.actor.state_dict(),
             "critic": self.critic.state_dict(),
-            **({} if self.target_critic is None else {"target_critic": self.target_critic.state_dict()}),
+            "target_critic": self.target_critic.state_dict(),
             "normalizer": self.normalizer.state_dict(),
             "log_alpha": self.log_alpha.detach().clone(),
             "optimizer": self.optimizer.state_dict(),
@@ -307,7 +305,7 @@ class SACAgent:
         where left out, is untrained."""
         state = self.state_dict()
         for name in (*POLICY_ONLY_DROPS, *(() if self.settings.share_encoder else ("critic",))):
-            state.pop(name, None)
+            del state[name]
         return state
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
@@ -340,8 +338,7 @@ class SACAgent:
         self.actor.load_state_dict(state["actor"])
         if "critic" in state:
             self.critic.load_state_dict(state["critic"])
-            if self.target_critic is not None:
-                self.target_critic.load_state_dict(state.get("target_critic", state["critic"]))
+            self.target_critic.load_state_dict(state.get("target_critic", state["critic"]))
         self.normalizer.load_state_dict(state["normalizer"])
         with torch.no_grad():
             self.log_alpha.copy_(state["log_alpha"])

@@ -43,14 +43,7 @@ class SACSettings:
     """Entropy the temperature tuning aims at; ``None`` means -action_dim."""
     gamma: float = 0.98
     polyak: float = 0.95
-    """target <- polyak * target + (1 - polyak) * online, after every update. 0 keeps no target critic: the
-    critic judges the next states itself, held constant, in one pass with this batch's states (CrossQ's
-    way), which gives the values a target copy would give for less work."""
-    critic_norm: bool = False
-    """Batch normalisation before each of the critic's hidden activations, over this batch's states and
-    the next ones together (CrossQ): the statistics then cover both, so the next states' values are read
-    with the same normalisation as the values they train. Needs ``polyak: 0``. The actor's loss reads the
-    critic normalised over the states and the policy's actions it judges."""
+    """target <- polyak * target + (1 - polyak) * online, after every update."""
     critics: int = 1
     """1 as in the paper; 2 for clipped double Q (the target takes the smaller)."""
     clip_target: bool = True
@@ -116,7 +109,6 @@ class SACSettings:
         "hidden_layers",
         "architecture",
         "share_encoder",
-        "critic_norm",
         "autotune_alpha",
         "sentence_in_trunk",
     )
@@ -145,11 +137,6 @@ class SACSettings:
             raise ValueError(f"grounding must not be negative, got {self.grounding}")
         if self.actor_every < 1:
             raise ValueError(f"actor_every must be a positive number of updates, got {self.actor_every}")
-        if self.critic_norm and self.polyak != 0.0:
-            raise ValueError(
-                f"critic_norm normalises this and the next states in one pass of the critic, which needs polyak: 0 "
-                f"(no target critic), got polyak {self.polyak}"
-            )
         if self.batch_size < 1 or self.hidden_layers < 0:
             raise ValueError("batch_size must be positive and hidden_layers not negative")
 

@@ -58,17 +58,13 @@ def _agent(seed: int = 0, **settings: object) -> SACAgent:
 
 
 def _parameters(agent: SACAgent) -> list[torch.Tensor]:
-    target = [] if agent.target_critic is None else [*agent.target_critic.parameters()]
-    return [*agent.actor.parameters(), *agent.critic.parameters(), *target, agent.log_alpha]
+    return [*agent.actor.parameters(), *agent.critic.parameters(), *agent.target_critic.parameters(), agent.log_alpha]
 
 
-@pytest.mark.parametrize(
-    ("architecture", "crossq"), [("flat", False), ("objects", False), ("flat", True), ("objects", True)]
-)
-def test_learns_which_way_each_sentence_asks_for(architecture: str, crossq: bool) -> None:
+@pytest.mark.parametrize("architecture", ["flat", "objects"])
+def test_learns_which_way_each_sentence_asks_for(architecture: str) -> None:
     rng = np.random.default_rng(0)
-    cross = {"polyak": 0.0, "critic_norm": True} if crossq else {}
-    agent = _agent(batch_size=128, architecture=architecture, **cross)  # type: ignore[arg-type]
+    agent = _agent(batch_size=128, architecture=architecture)
     for _ in range(250):
         agent.update(_batch(rng, 128))
     obs = rng.normal(size=(100, OBS_DIM)).astype(np.float32)
@@ -189,37 +185,28 @@ def test_grounding_loss_is_zero_without_readers_weight_or_relabelled_rows() -> N
 
 
 @pytest.mark.parametrize(
-    ("architecture", "depth", "grounding", "trunk", "polyak"),
+    ("architecture", "depth", "grounding", "trunk"),
     [
-        ("flat", 1, 0.0, True, 0.95),
-        ("objects", 1, 1.0, True, 0.95),
-        ("flat", 0, 0.0, True, 0.95),
-        ("objects", 2, 0.5, True, 0.95),
-        ("objects", 1, 1.0, False, 0.95),
-        ("flat", 1, 0.0, True, 0.0),
-        ("objects", 2, 1.0, True, 0.0),
+        ("flat", 1, 0.0, True),
+        ("objects", 1, 1.0, True),
+        ("flat", 0, 0.0, True),
+        ("objects", 2, 0.5, True),
+        ("objects", 1, 1.0, False),
     ],
 )
 def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
-    architecture: str, depth: int, grounding: float, trunk: bool, polyak: float
+    architecture: str, depth: int, grounding: float, trunk: bool
 ) -> None:
     """The update shares work between the losses (one pass of the encoders, the readers' attention computed
     once for the networks and the grounding loss, the critic's reading of the states reused for the policy's
-    action, this and the next states in one pass without a target critic, one backward pass); the gradients
-    must be those of the losses written out one by one."""
+    action, one backward pass); the gradients must be those of the losses written out one by one."""
     rng = np.random.default_rng(0)
     agent = _agent(
-        critics=2,
-        architecture=architecture,
-        hidden_layers=depth,
-        grounding=grounding,
-        sentence_in_trunk=trunk,
-        polyak=polyak,
+        critics=2, architecture=architecture, hidden_layers=depth, grounding=grounding, sentence_in_trunk=trunk
     )
     agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
     batch = _grounding_batch(rng)
     batch.named[::3] = -1  # not relabelled: no grounding label
-    batch.done[1::2] = False  # these rows' targets read the next states' values
     reference = SACAgent.from_state_dict(agent.state_dict())
     agent.optimizer.step = lambda: None  # type: ignore[method-assign,assignment,return-value]  # keep the gradients
     agent.update(batch)
@@ -232,8 +219,7 @@ def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
     with torch.no_grad():  # the exploration noise is drawn in the update's order: next actions first
         noise = torch.randn(len(batch.obs), ACTION_DIM, generator=r.generator)
         next_action, next_log_prob = r.actor.sample(next_obs, r.actor.encoder(next_tokens), noise, next_present)
-        target_critic = r.critic if r.target_critic is None else r.target_critic  # no target: the critic itself
-        next_q = target_critic(next_obs, target_critic.encoder(next_tokens), next_action, next_present)
+        next_q = r.target_critic(next_obs, r.target_critic.encoder(next_tokens), next_action, next_present)
         not_done = 1.0 - torch.as_tensor(batch.done, dtype=torch.float32)
         soft_value = next_q.min(0).values - alpha * next_log_prob
         target = torch.as_tensor(batch.reward) + r.settings.gamma * not_done * soft_value
@@ -310,8 +296,7 @@ def test_state_survives_weights_only_load_and_resumes_bit_identically(
     architecture: str, compile: bool, caplog: pytest.LogCaptureFixture
 ) -> None:
     rng = np.random.default_rng(0)
-    crossq = {"polyak": 0.0, "critic_norm": True} if architecture == "objects" else {}
-    agent = _agent(critics=2, architecture=architecture, compile=compile, **crossq)  # type: ignore[arg-type]
+    agent = _agent(critics=2, architecture=architecture, compile=compile)
     agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
     for _ in range(3):
         agent.update(_batch(rng))
@@ -444,63 +429,6 @@ def test_an_update_between_the_actors_trains_the_critic_as_a_whole_update_does(s
     assert not all(torch.equal(a, b) for a, b in zip(actor_before, delayed.actor.parameters()))
 
 
-def test_without_a_target_critic_the_critic_judges_the_next_states_in_its_own_pass() -> None:
-    """``polyak: 0`` keeps no target critic and reads the sentences once per encoder; ``critic_norm`` then
-    normalises the critic's hidden layer over this batch's and the next states together: the critic's loss
-    is that of one pass over both, the next values held constant, and the actor's loss reads the critic
-    normalised over the states and actions it judges."""
-    rng = np.random.default_rng(0)
-    agent = _agent(architecture="objects", polyak=0.0, critic_norm=True, grounding=0.0)
-    assert agent.target_critic is None and "target_critic" not in agent.state_dict()
-    assert len(agent._update_encoders()) == 2
-    agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
-    agent.update(_batch(rng))
-    reference = SACAgent.from_state_dict(agent.state_dict())
-    batch = _batch(rng)
-    batch.done[1::2] = False
-    agent.optimizer.step = lambda: None  # type: ignore[method-assign,assignment,return-value]  # keep the gradients
-    metrics = agent.update(batch)
-    assert len(agent.critic.norms) == 1 and not list(agent.critic.buffers())  # nothing kept between updates
-
-    r = reference
-    obs, present = observed(r, torch.as_tensor(batch.obs))
-    next_obs, next_present = observed(r, torch.as_tensor(batch.next_obs))
-    tokens = torch.as_tensor(np.concatenate([batch.instruction, batch.next_instruction]))
-    alpha = r.log_alpha.exp().detach()
-    with torch.no_grad():
-        next_noise = torch.randn(len(batch.obs), ACTION_DIM, generator=r.generator)
-        next_action, next_log_prob = r.actor.sample(next_obs, r.actor.encoder(tokens)[64:], next_noise, next_present)
-    both = r.critic(
-        torch.cat([obs, next_obs]),
-        r.critic.encoder(tokens),
-        torch.cat([torch.as_tensor(batch.action), next_action]),
-        torch.cat([present, next_present]),
-    )
-    q, next_q = both[:, :64], both[:, 64:].detach()
-    not_done = 1.0 - torch.as_tensor(batch.done, dtype=torch.float32)
-    soft_value = next_q.min(0).values - alpha * next_log_prob
-    target = torch.as_tensor(batch.reward) + r.settings.gamma * not_done * soft_value
-    critic_loss = (q - target.clamp(-1.0 / (1.0 - r.settings.gamma), 0.0)).pow(2).mean(dim=1).sum()
-    assert metrics["critic_loss"] == pytest.approx(critic_loss.item(), rel=1e-5)
-    _assert_gradients(agent.critic, r.critic, critic_loss)
-    language = r.actor.encoder(tokens[:64])
-    noise = torch.randn(len(batch.obs), ACTION_DIM, generator=r.generator)
-    pi_action, log_prob = r.actor.sample(obs, language, noise, present)
-    frozen = r.critic.value(r.critic.observe(obs, r.critic.encoder(tokens[:64]).detach(), present), pi_action, True)
-    actor_loss = (alpha * log_prob - frozen.min(dim=0).values).mean()
-    assert metrics["actor_loss"] == pytest.approx(actor_loss.item(), rel=1e-5)
-    _assert_gradients(agent.actor, r.actor, actor_loss)
-
-
-def _assert_gradients(network: torch.nn.Module, reference: torch.nn.Module, loss: torch.Tensor) -> None:
-    """``network``'s gradients are those of ``loss`` computed by ``reference``, its twin."""
-    expected = torch.autograd.grad(loss, list(reference.parameters()), retain_graph=True, allow_unused=True)
-    for (name, parameter), want in zip(network.named_parameters(), expected):
-        want = torch.zeros_like(parameter) if want is None else want
-        got = torch.zeros_like(parameter) if parameter.grad is None else parameter.grad
-        torch.testing.assert_close(got, want, rtol=1e-4, atol=1e-6, msg=name)
-
-
 def test_learn_averages_each_metric_over_the_updates_that_report_it() -> None:
     rng = np.random.default_rng(0)
     buffer = ReplayBuffer(2000, OBS_DIM, ACTION_DIM, seed=0)
@@ -539,8 +467,6 @@ def test_settings_reject_nonsense_and_round_trip_as_plain_data() -> None:
         BufferSettings(relabel_ratio=1.5)
     with pytest.raises(ValueError, match="actor_every"):
         SACSettings(actor_every=0)
-    with pytest.raises(ValueError, match="critic_norm .* needs polyak: 0"):
-        SACSettings(critic_norm=True)
     settings = SACSettings(critics=2, max_grad_norm=1.0)
     assert SACSettings.from_dict(dataclasses.asdict(settings)) == settings
     with pytest.raises(ValueError, match="unknown"):
