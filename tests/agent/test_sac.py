@@ -207,6 +207,7 @@ def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
     agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
     batch = _grounding_batch(rng)
     batch.named[::3] = -1  # not relabelled: no grounding label
+    batch.done[1::2] = False  # these rows' targets read the target critic's values of the next states
     reference = SACAgent.from_state_dict(agent.state_dict())
     agent.optimizer.step = lambda: None  # type: ignore[method-assign,assignment,return-value]  # keep the gradients
     agent.update(batch)
