@@ -229,7 +229,9 @@ class SACAgent:
 
     def _sampled_tensors(self, batch: Batch) -> SampledTensors:
         """The batch as tensors, with the policy's noise for the next states and for these, drawn from the
-        agent's own stream, so the losses are a function of tensors alone."""
+        agent's own stream, so the losses are a function of tensors alone. Both are drawn in every update,
+        one that leaves the actor alone too (``actor_every``), so that each update's draws depend on the
+        update count only, whatever the setting."""
 
         def tensor(array: np.ndarray) -> torch.Tensor:
             return torch.as_tensor(array, device=self.device)
