@@ -64,26 +64,10 @@ class EnsembleLinear(nn.Module):
         self.weight = nn.Parameter(torch.empty(n, in_features, out_features).uniform_(-bound, bound))
         self.bias = nn.Parameter(torch.empty(n, 1, out_features).uniform_(-bound, bound))
 
-    def forward(self, x: torch.Tensor, frozen: bool = False) -> torch.Tensor:
-        """``frozen``: the weights read as constants (:meth:`Critic.value`)."""
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
         if x.dim() == 2:
             x = x.expand(self.weight.shape[0], *x.shape)
-        weight, bias = (self.weight.detach(), self.bias.detach()) if frozen else (self.weight, self.bias)
-        return torch.baddbmm(bias, x, weight)
-
-
-class EnsembleLayerNorm(nn.Module):
-    """Layer normalisation over the last dimension of [n, B, features], with a learnt scale and shift for
-    each of the ``n`` members, so that the members of an ensemble stay independent."""
-
-    def __init__(self, n: int, features: int) -> None:
-        super().__init__()
-        self.weight = nn.Parameter(torch.ones(n, 1, features))
-        self.bias = nn.Parameter(torch.zeros(n, 1, features))
-
-    def forward(self, x: torch.Tensor, frozen: bool = False) -> torch.Tensor:
-        weight, bias = (self.weight.detach(), self.bias.detach()) if frozen else (self.weight, self.bias)
-        return torch.addcmul(bias, F.layer_norm(x, x.shape[-1:]), weight)
+        return torch.baddbmm(self.bias, x, self.weight)
 
 
 class SceneReader(nn.Module):
@@ -150,10 +134,10 @@ def attention_loss(
     return loss
 
 
-def _mlp(input_size: int, hidden_size: int, depth: int, layer_norm: bool) -> nn.Sequential:
+def _mlp(input_size: int, hidden_size: int, depth: int) -> nn.Sequential:
     layers: list[nn.Module] = []
     for _ in range(depth):
-        layers += [nn.Linear(input_size, hidden_size), *([nn.LayerNorm(hidden_size)] if layer_norm else []), nn.ReLU()]
+        layers += [nn.Linear(input_size, hidden_size), nn.ReLU()]
         input_size = hidden_size
     return nn.Sequential(*layers)
 
@@ -180,16 +164,14 @@ class Actor(nn.Module):
         log_std_max: float,
         layout: ObjectLayout | None = None,
         sentence_in_trunk: bool = True,
-        layer_norm: bool = False,
     ) -> None:
         super().__init__()
         self.encoder = encoder
         self.reader = None if layout is None else SceneReader(1, layout, language_size, obs_size)
         self.obs_layer = nn.Linear(obs_dim if self.reader is None else self.reader.output_size, obs_size)
-        self.obs_norm = nn.LayerNorm(obs_size) if layer_norm else nn.Identity()
         self.sentence_in_trunk = sentence_in_trunk
         body_input = obs_size + (language_size if sentence_in_trunk else 0)
-        self.body = _mlp(body_input, hidden_size, depth, layer_norm)
+        self.body = _mlp(body_input, hidden_size, depth)
         body_size = hidden_size if depth > 0 else body_input
         self.mean = nn.Linear(body_size, action_dim)
         self.log_std = nn.Linear(body_size, action_dim)
@@ -207,7 +189,7 @@ class Actor(nn.Module):
         reader's attention logits for these arguments, when the caller has them already."""
         if self.reader is not None:
             obs = self.reader(obs, language, present, scores)[0]
-        observed = F.relu(self.obs_norm(self.obs_layer(obs)))
+        observed = F.relu(self.obs_layer(obs))
         h = self.body(torch.cat([observed, language], dim=1) if self.sentence_in_trunk else observed)
         log_std = self.log_std(h).clamp(self.log_std_min, self.log_std_max)
         return self.mean(h), log_std
@@ -256,22 +238,17 @@ class Critic(nn.Module):
         n_critics: int,
         layout: ObjectLayout | None = None,
         sentence_in_trunk: bool = True,
-        layer_norm: bool = False,
     ) -> None:
         super().__init__()
         self.encoder = encoder
         self.reader = None if layout is None else SceneReader(n_critics, layout, encoder.output_size, obs_size)
         obs_input = obs_dim if self.reader is None else self.reader.output_size
         self.obs_layer = EnsembleLinear(n_critics, obs_input, obs_size)
-        self.obs_norm = EnsembleLayerNorm(n_critics, obs_size) if layer_norm else nn.Identity()
         self.sentence_in_trunk = sentence_in_trunk
         input_size = obs_size + (encoder.output_size if sentence_in_trunk else 0) + action_dim
         layers: list[nn.Module] = []
         for _ in range(depth):
-            layers.append(EnsembleLinear(n_critics, input_size, hidden_size))
-            if layer_norm:
-                layers.append(EnsembleLayerNorm(n_critics, hidden_size))
-            layers.append(nn.ReLU())
+            layers += [EnsembleLinear(n_critics, input_size, hidden_size), nn.ReLU()]
             input_size = hidden_size
         self.body = nn.Sequential(*layers)
         self.q = EnsembleLinear(n_critics, input_size, 1)
@@ -301,7 +278,7 @@ class Critic(nn.Module):
         """
         if self.reader is not None:
             obs = self.reader(obs, language, present, scores)
-        observed = F.relu(self.obs_norm(self.obs_layer(obs)))
+        observed = F.relu(self.obs_layer(obs))
         first = self._first_layer()
         state = (
             torch.cat([observed, language.expand(self.n_critics, -1, -1)], dim=2)
@@ -315,11 +292,19 @@ class Critic(nn.Module):
         the weights read as constants, so that the values' gradient reaches ``action`` and ``observed`` alone
         (how the actor's loss judges the policy's action without training the critic)."""
 
-        first = self._first_layer().weight[:, -self.action_dim :]
-        h = torch.baddbmm(observed, action.expand(self.n_critics, -1, -1), first.detach() if frozen else first)
+        def weights(layer: EnsembleLinear) -> tuple[torch.Tensor, torch.Tensor]:
+            return (layer.weight.detach(), layer.bias.detach()) if frozen else (layer.weight, layer.bias)
+
+        h = torch.baddbmm(
+            observed, action.expand(self.n_critics, -1, -1), weights(self._first_layer())[0][:, -self.action_dim :]
+        )
         if len(self.body) > 0:  # the first layer was the body's; the rest of the body and the output follow
             for layer in [*self.body[1:], self.q]:
-                h = layer(h, frozen) if isinstance(layer, (EnsembleLinear, EnsembleLayerNorm)) else layer(h)
+                if isinstance(layer, EnsembleLinear):
+                    weight, bias = weights(layer)
+                    h = torch.baddbmm(bias, h, weight)
+                else:
+                    h = layer(h)
         return h.squeeze(2)
 
     def _first_layer(self) -> EnsembleLinear:

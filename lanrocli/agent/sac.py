@@ -87,7 +87,6 @@ class SACAgent:
                 s.log_std_max,
                 self.layout,
                 s.sentence_in_trunk,
-                s.layer_norm,
             ).to(self.device)
             self.critic = Critic(
                 obs_dim,
@@ -99,7 +98,6 @@ class SACAgent:
                 s.critics,
                 self.layout,
                 s.sentence_in_trunk,
-                s.layer_norm,
             ).to(self.device)
         self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
         # The layout serves the normaliser whatever the architecture: objects share statistics across slots.

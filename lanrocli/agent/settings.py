@@ -57,11 +57,6 @@ class SACSettings:
     """Width of the observation layer, and of the attention's keys and queries (objects)."""
     hidden_size: int = 256
     hidden_layers: int = 1
-    layer_norm: bool = False
-    """Normalise the pre-activations of every hidden layer of actor and critic (the observation layer's
-    too) over their units, with a learnt scale and shift per unit, as BRO's and Simba's networks do: the
-    critic's inputs to each layer then keep one scale however far its values drift, which these works
-    found to let a critic learn from fewer steps."""
     architecture: Literal["flat", "objects"] = "flat"
     """``flat``: the observation through one layer, joined with the sentence summary (the paper's baseline);
     ``objects``: attention of the sentence summary over the objects picks the named one, and the observation
@@ -112,7 +107,6 @@ class SACSettings:
         "obs_size",
         "hidden_size",
         "hidden_layers",
-        "layer_norm",
         "architecture",
         "share_encoder",
         "autotune_alpha",

@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 import torch
-import torch.nn.functional as F
 
 from lanrocli.agent.encoder import LanguageEncoder
-from lanrocli.agent.networks import Actor, Critic, EnsembleLayerNorm, EnsembleLinear, ObjectLayout, SceneReader
+from lanrocli.agent.networks import Actor, Critic, EnsembleLinear, ObjectLayout, SceneReader
 from lanrocli.language import grammar_vocabulary, sample_sentence
 
 VOCAB = grammar_vocabulary()
@@ -81,49 +79,6 @@ def test_two_critics_differ_and_each_reads_obs_language_and_action() -> None:
         critic(obs, language, -action),
     ):
         assert not torch.allclose(changed, q)
-
-
-def test_a_layer_normalised_critic_is_the_network_written_out_member_by_member() -> None:
-    """The critic reads the states apart from the action (``observe``, then ``value``); with layer norms
-    each member must still be the plain stack: linear, normalisation with its own scale and shift, ReLU."""
-    torch.manual_seed(0)
-    critic = Critic(6, 3, _encoder(), 16, 32, 2, n_critics=2, layer_norm=True)
-    with torch.no_grad():  # scales and shifts away from their initial ones and apart between members
-        for norm in critic.modules():
-            if isinstance(norm, EnsembleLayerNorm):
-                norm.weight.uniform_(0.5, 1.5)
-                norm.bias.uniform_(-0.5, 0.5)
-    obs, language, action = torch.randn(10, 6), torch.randn(10, 32), torch.rand(10, 3)
-    norms = [critic.obs_norm, *(layer for layer in critic.body if isinstance(layer, EnsembleLayerNorm))]
-    linears = [layer for layer in critic.body if isinstance(layer, EnsembleLinear)]
-    for m in range(2):
-
-        def norm(x: torch.Tensor, i: int, m: int = m) -> torch.Tensor:
-            return F.layer_norm(x, x.shape[-1:]) * norms[i].weight[m] + norms[i].bias[m]
-
-        h = F.relu(norm(obs @ critic.obs_layer.weight[m] + critic.obs_layer.bias[m], 0))
-        h = torch.cat([h, language, action], dim=1)
-        for i, linear in enumerate(linears, start=1):
-            h = F.relu(norm(h @ linear.weight[m] + linear.bias[m], i))
-        q = (h @ critic.q.weight[m] + critic.q.bias[m]).squeeze(1)
-        torch.testing.assert_close(critic(obs, language, action)[m], q)
-
-
-@pytest.mark.parametrize("layer_norm", [False, True])
-def test_layer_norms_make_the_networks_blind_to_the_scale_of_a_layer(layer_norm: bool) -> None:
-    """Scaling a layer's weights and bias leaves a normalised network's output as it was, and moves a plain one."""
-    torch.manual_seed(0)
-    actor = Actor(6, 3, None, 32, 16, 32, 2, -20.0, 2.0, layer_norm=layer_norm)
-    critic = Critic(6, 3, _encoder(), 16, 32, 2, n_critics=2, layer_norm=layer_norm)
-    obs, language, action = torch.randn(10, 6), torch.randn(10, 32), torch.rand(10, 3)
-    before = actor(obs, language)[0], critic(obs, language, action)
-    with torch.no_grad():
-        for layer in (actor.obs_layer, actor.body[0], critic.obs_layer, critic.body[0]):
-            layer.weight.mul_(3.0)
-            layer.bias.mul_(3.0)
-    after = actor(obs, language)[0], critic(obs, language, action)
-    for old, new in zip(before, after):
-        assert torch.allclose(old, new, atol=1e-5) == layer_norm
 
 
 LAYOUT = ObjectLayout(arm=4, object=5, slots=3)

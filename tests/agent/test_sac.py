@@ -185,30 +185,24 @@ def test_grounding_loss_is_zero_without_readers_weight_or_relabelled_rows() -> N
 
 
 @pytest.mark.parametrize(
-    ("architecture", "depth", "grounding", "trunk", "layer_norm"),
+    ("architecture", "depth", "grounding", "trunk"),
     [
-        ("flat", 1, 0.0, True, False),
-        ("objects", 1, 1.0, True, False),
-        ("flat", 0, 0.0, True, False),
-        ("objects", 2, 0.5, True, False),
-        ("objects", 1, 1.0, False, False),
-        ("objects", 2, 1.0, False, True),
+        ("flat", 1, 0.0, True),
+        ("objects", 1, 1.0, True),
+        ("flat", 0, 0.0, True),
+        ("objects", 2, 0.5, True),
+        ("objects", 1, 1.0, False),
     ],
 )
 def test_update_gives_each_network_the_gradient_of_its_own_sac_loss(
-    architecture: str, depth: int, grounding: float, trunk: bool, layer_norm: bool
+    architecture: str, depth: int, grounding: float, trunk: bool
 ) -> None:
     """The update shares work between the losses (one pass of the encoders, the readers' attention computed
     once for the networks and the grounding loss, the critic's reading of the states reused for the policy's
     action, one backward pass); the gradients must be those of the losses written out one by one."""
     rng = np.random.default_rng(0)
     agent = _agent(
-        critics=2,
-        architecture=architecture,
-        hidden_layers=depth,
-        grounding=grounding,
-        sentence_in_trunk=trunk,
-        layer_norm=layer_norm,
+        critics=2, architecture=architecture, hidden_layers=depth, grounding=grounding, sentence_in_trunk=trunk
     )
     agent.update_normalizer(rng.normal(size=(50, OBS_DIM)))
     batch = _grounding_batch(rng)
