@@ -131,7 +131,8 @@ class Panda:
                 URDF,
                 basePosition=ROBOT_BASE,
                 useFixedBase=True,
-                flags=pybullet.URDF_ENABLE_CACHED_GRAPHICS_SHAPES,
+                flags=pybullet.URDF_ENABLE_CACHED_GRAPHICS_SHAPES
+                | (0 if world.images else pybullet.URDF_IGNORE_VISUAL_SHAPES),
             )
         )
         arm_infos = [client.getJointInfo(self.body_id, j) for j in ARM_JOINTS]

@@ -61,10 +61,17 @@ class World:
 
     ``revision`` increases whenever the state may have changed (a step or a reset), so
     that robot and object state queries can be cached between changes.
+
+    ``images=False`` declares that nothing will ever draw this world (no camera image, no GUI), so the arm
+    is loaded without its visual meshes, which take most of the time an environment takes to build;
+    the physics are the same either way.
     """
 
-    def __init__(self, gui: bool = False, camera: CameraPose | None = None) -> None:
+    def __init__(self, gui: bool = False, camera: CameraPose | None = None, images: bool = True) -> None:
+        if gui and not images:
+            raise ValueError("a world shown in the GUI is drawn: it needs images=True")
         camera = camera if camera is not None else CameraPose()
+        self.images = images
         with _native_stdout_silenced():
             self._client = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
         self._closed = False
@@ -157,6 +164,8 @@ class World:
 
     def render(self, width: int = 320, height: int = 240) -> npt.NDArray[np.uint8]:
         """RGB uint8 image of shape (height, width, 3) of the table and the arm."""
+        if not self.images:
+            raise RuntimeError("this world was built with images=False: build it with images=True to draw it")
         return self._camera.render(width, height)
 
     def close(self) -> None:

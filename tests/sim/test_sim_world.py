@@ -89,9 +89,12 @@ def test_close_twice_is_harmless() -> None:
     w.close()
 
 
-def test_same_actions_give_same_states() -> None:
-    def rollout() -> np.ndarray:
-        with World() as w:
+@pytest.mark.parametrize("images", [True, False])
+def test_same_actions_give_same_states_drawn_or_not(images: bool) -> None:
+    """A world that will never be drawn leaves the arm's visual meshes out; its physics must not change."""
+
+    def rollout(images: bool = True) -> np.ndarray:
+        with World(images=images) as w:
             robot = Panda(w, gripper=True)
             objects = ObjectSet(w)
             objects.spawn("cube", "red", resting_position("cube", 0.05, 0.0))
@@ -105,4 +108,16 @@ def test_same_actions_give_same_states() -> None:
                 trace.append(np.concatenate([robot.state().ee_position, *states]))
             return np.array(trace)
 
-    np.testing.assert_array_equal(rollout(), rollout())
+    np.testing.assert_array_equal(rollout(images), rollout())
+
+
+def test_a_world_built_without_images_has_no_arm_meshes_and_refuses_to_draw() -> None:
+    with World(images=False) as undrawn, World() as drawn:
+        # Without its visual meshes PyBullet shows the arm's collision meshes in their place.
+        meshes = [{shape[4] for shape in w.client.getVisualShapeData(Panda(w).body_id)} for w in (undrawn, drawn)]
+        assert not any(b"/visual/" in mesh for mesh in meshes[0])
+        assert any(b"/visual/" in mesh for mesh in meshes[1])
+        with pytest.raises(RuntimeError, match="images=True"):
+            undrawn.render(8, 8)
+    with pytest.raises(ValueError, match="images=True"):
+        World(gui=True, images=False)
