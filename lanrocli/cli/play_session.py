@@ -188,7 +188,14 @@ def play(path: Path, options: PlayOptions, stream: TextIO, console: Console) -> 
         raise PlayError(f"--gif {options.gif} is a file; give a folder, where episode-1.gif, ... are written")
     task, settings, slots, policy = load_agent(path, options)
     try:
-        env = LanroEnv(task, settings, object_slots=slots, gui=options.gui, vocabulary=policy.vocabulary)
+        env = LanroEnv(
+            task,
+            settings,
+            object_slots=slots,
+            render_mode=None if options.gif is None else "rgb_array",
+            gui=options.gui,
+            vocabulary=policy.vocabulary,
+        )
     except pybullet.error as error:
         raise PlayError(f"PyBullet could not open its window: {error}") from None
     threshold = None
