@@ -234,6 +234,24 @@ def test_render_returns_a_captioned_image() -> None:
     env.close()
 
 
+@pytest.mark.parametrize("task", ["push", "lift"])
+def test_an_environment_that_renders_plays_the_episodes_of_one_that_does_not(task: str) -> None:
+    """Only a rendering environment loads the arm's visual meshes; every number of its episodes must be the same."""
+
+    def episodes(render_mode: str | None) -> list[tuple]:
+        env = LanroEnv(task, objects=3, mode="colour_shape", correction_rate=1.0, render_mode=render_mode)
+        try:
+            return [
+                (obs["observation"].tolist(), obs["instruction"].tolist(), reward, info["object_positions"].tolist())
+                for seed in range(2)
+                for obs, reward, *_, info in rollout(env, "mistaken", seed)
+            ]
+        finally:
+            env.close()
+
+    assert episodes("rgb_array") == episodes(None)
+
+
 def test_object_slots_pad_the_observation_with_zeros() -> None:
     env = LanroEnv("reach", objects=2, object_slots=3)
     obs, _ = env.reset(seed=4)
