@@ -1,4 +1,4 @@
-"""The sweep's resources by default, the priority of its trials, and failures told in a line."""
+"""The sweep's resources by default, and failures told in a line."""
 
 from __future__ import annotations
 
@@ -26,16 +26,3 @@ def test_a_failure_is_told_by_the_trials_own_exception() -> None:
         cause = RunError("runs/x is in use: process 12 is writing this run.\nWait for it to end.")
 
     assert _summary(Wrapped("Ray's traceback ...")) == "RunError: runs/x is in use: process 12 is writing this run."
-
-
-def test_a_local_sweeps_trials_run_at_the_priority_of_the_command() -> None:
-    import ray
-
-    from lanrocli.sweep.execute import ray_instance
-
-    @ray.remote
-    def niceness() -> int:
-        return os.nice(0)
-
-    with ray_instance(Resources(cpus_per_trial=1, cpus=1)):
-        assert ray.get(niceness.remote()) == os.nice(0)  # Ray's own default would be 15

@@ -1,6 +1,7 @@
 """lanro sweep on a real local Ray instance: two seeds of the tiny curriculum, one CPU each, finished,
-interrupted with SIGINT, killed with SIGKILL, and with one trial's process killed under it. Interrupted
-sweeps resumed with --resume end with the same run folders, trial by trial, as the uninterrupted one."""
+interrupted with SIGINT, killed with SIGKILL, and with one trial's process killed under it (trials run at the
+priority of the command). Interrupted sweeps resumed with --resume end with the same run folders, trial by
+trial, as the uninterrupted one."""
 
 from __future__ import annotations
 
@@ -84,8 +85,9 @@ def test_a_trial_that_crashes_leaves_the_others_to_finish(tmp_path: Path) -> Non
     out = tmp_path / "sweep"
     process = sweep([str(path), "--out", "sweep", *SEEDS], tmp_path)
     started(out, process)
-    holder = (out / "seed=1" / LOCK).read_text().split()[-1]
-    os.kill(int(holder), signal.SIGKILL)  # the Ray worker that runs trial seed=1
+    holder = int((out / "seed=1" / LOCK).read_text().split()[-1])  # the Ray worker that runs trial seed=1
+    assert os.getpriority(os.PRIO_PROCESS, holder) == os.nice(0)  # the command's priority; Ray's own is 15
+    os.kill(holder, signal.SIGKILL)
     output = process.communicate(timeout=180)[0]
     assert process.returncode == 1, output
     assert "trial seed=1 failed" in output and "1 of 2 trials finished" in output

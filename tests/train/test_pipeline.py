@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import multiprocessing
 import os
+import shutil
 import signal
 from collections.abc import Iterator
 from pathlib import Path
@@ -414,7 +415,8 @@ def test_a_worker_killed_in_the_tests_is_reported_and_the_resumed_run_tests_as_o
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The last stage's tests over two worker processes, one of them killed: the run stops with a
-    MeasuringError and no test.json; resumed, its tests equal those of a run that measured in one process."""
+    MeasuringError and no test.json; resumed, its tests equal those of the same run resumed to measure in one
+    process."""
     monkeypatch.setattr(blocks, "CHUNK", 4)  # ten test episodes make blocks for both workers
     data = load_curriculum(tiny(tmp_path)).model_dump()
     data["stages"] = [data["stages"][2]]
@@ -435,11 +437,13 @@ def test_a_worker_killed_in_the_tests_is_reported_and_the_resumed_run_tests_as_o
         run.run(kill_a_worker)
     run.close()
     assert killed and not (tmp_path / "run" / "stage-1-third" / TEST).exists()
+    shutil.copytree(tmp_path / "run", tmp_path / "here")
     resumed = CurriculumRun.resume(tmp_path / "run", plan)
     resumed.workers = 2
     assert resumed.run()
     resumed.close()
-    straight = CurriculumRun.start(plan, tmp_path / "straight")
-    assert straight.run()
-    straight.close()
-    assert outcome(tmp_path / "run") == outcome(tmp_path / "straight")
+    here = CurriculumRun.resume(tmp_path / "here", plan)
+    assert here.workers == 1 and here.run()
+    here.close()
+    assert (tmp_path / "run" / "stage-1-third" / TEST).is_file()
+    assert outcome(tmp_path / "run") == outcome(tmp_path / "here")
