@@ -1,3 +1,4 @@
 """The named choices every layer shares (tasks, modes, kinds and forms of correction, splits), the
-registries of what may be extended, the seeds of each kind of episode, the reward and interval statistics.
+registries of what may be extended, the seeds of each kind of episode, the reward and interval statistics,
+the simulation's rates.
 Imports nothing of lanro's."""
