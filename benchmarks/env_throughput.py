@@ -5,11 +5,9 @@ For each task it reports the steps/s of ``LanroEnv`` and, from the same run, the
 instructor, the observation) is visible. With ``--reference-python`` pointing at an interpreter that has
 the public ``lanro-gym`` 0.2.1 installed (it needs gymnasium < 1.0, so it lives in its own virtual
 environment), the equivalent reference environment ``PandaNL<Task>2ShapeAR-v0`` is measured in the same
-session, alternating rounds with ours, and the ratio is printed. With several ``--physics-hz`` rates, each
-task is measured at each rate in alternating rounds, and the ratio is to the first rate.
+session, alternating rounds with ours, and the ratio is printed.
 
     python benchmarks/env_throughput.py --steps 3000 --rounds 3 --reference-python /tmp/refvenv/bin/python
-    python benchmarks/env_throughput.py --tasks push --physics-hz 500 250
 """
 
 from __future__ import annotations
@@ -24,7 +22,6 @@ import time
 import numpy as np
 
 from lanrocli.envs.env import LanroEnv
-from lanrocli.sim import PHYSICS_HZ
 from lanrocli.tasks import TASKS
 
 REFERENCE_SNIPPET = """
@@ -44,8 +41,8 @@ print(steps / (time.perf_counter() - start))
 """
 
 
-def measure_ours(task: str, steps: int, seed: int, physics_hz: int = PHYSICS_HZ) -> dict[str, float]:
-    env = LanroEnv(task, objects=2, mode="shape", correction_rate=0.5, physics_hz=physics_hz)
+def measure_ours(task: str, steps: int, seed: int) -> dict[str, float]:
+    env = LanroEnv(task, objects=2, mode="shape", correction_rate=0.5)
     physics = 0.0
     bare_step = env.world.step_physics
 
@@ -81,40 +78,31 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3, help="alternating rounds; the median is reported")
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS)
     parser.add_argument("--reference-python", help="python of a virtual environment with lanro-gym 0.2.1")
-    parser.add_argument(
-        "--physics-hz", type=int, nargs="+", default=[PHYSICS_HZ], help="physics rates; ratios are to the first"
-    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args()
 
     results: dict[str, dict[str, float]] = {}
     for task in args.tasks:
-        ours: dict[int, list[dict[str, float]]] = {rate: [] for rate in args.physics_hz}
-        reference = []
+        ours, reference = [], []
         for round_ in range(args.rounds):
-            for rate in args.physics_hz:
-                ours[rate].append(measure_ours(task, args.steps, seed=round_, physics_hz=rate))
+            ours.append(measure_ours(task, args.steps, seed=round_))
             if args.reference_python:
                 reference.append(measure_reference(args.reference_python, task, args.steps))
-        for rate, rounds in ours.items():
-            row = {key: statistics.median(r[key] for r in rounds) for key in rounds[0]}
-            if reference:
-                row["reference_steps_per_s"] = statistics.median(reference)
-                row["ratio"] = row["steps_per_s"] / row["reference_steps_per_s"]
-            elif rate != args.physics_hz[0]:
-                first = statistics.median(r["steps_per_s"] for r in ours[args.physics_hz[0]])
-                row["ratio"] = row["steps_per_s"] / first
-            results[task if len(ours) == 1 else f"{task}@{rate}Hz"] = row
+        row = {key: statistics.median(r[key] for r in ours) for key in ours[0]}
+        if reference:
+            row["reference_steps_per_s"] = statistics.median(reference)
+            row["ratio"] = row["steps_per_s"] / row["reference_steps_per_s"]
+        results[task] = row
 
     if args.json:
         print(json.dumps({"steps": args.steps, "rounds": args.rounds, "tasks": results}))
         return
-    print(f"{'task':<14}{'lanro steps/s':>15}{'bare physics':>15}{'overhead':>10}{'lanro-gym':>12}{'ratio':>8}")
+    print(f"{'task':<7}{'lanro steps/s':>15}{'bare physics':>15}{'overhead':>10}{'lanro-gym':>12}{'ratio':>8}")
     for task, row in results.items():
-        reference_column = f"{row['reference_steps_per_s']:12.0f}" if "reference_steps_per_s" in row else " " * 12
-        ratio = f"{reference_column}{row['ratio']:8.2f}" if "ratio" in row else ""
-        overhead = f"{100 * row['overhead']:9.1f}%"
-        print(f"{task:<14}{row['steps_per_s']:15.0f}{row['physics_steps_per_s']:15.0f}{overhead}{ratio}")
+        ref = f"{row['reference_steps_per_s']:12.0f}{row['ratio']:8.2f}" if "ratio" in row else ""
+        print(
+            f"{task:<7}{row['steps_per_s']:15.0f}{row['physics_steps_per_s']:15.0f}{100 * row['overhead']:9.1f}%{ref}"
+        )
 
 
 if __name__ == "__main__":

@@ -152,7 +152,7 @@ class LanroEnv(gym.Env[dict[str, np.ndarray], np.ndarray]):
         asks = 1 if settings.questions else 0
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.arm_actions + asks,), dtype=np.float32)
 
-        self.world = World(gui=gui, images=gui or render_mode is not None, physics_hz=settings.physics_hz)
+        self.world = World(gui=gui, images=gui or render_mode is not None)
         self.robot = Panda(self.world, gripper=self.task.gripper)
         self.objects = ObjectSet(self.world)
         split = None if split is None else Split(split)

@@ -13,7 +13,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from lanrocli.core.choices import Kind, Mode
-from lanrocli.core.rates import CONTROL_HZ, PHYSICS_HZ, substeps
 from lanrocli.envs.instructor import InstructorSettings
 from lanrocli.tasks import TASKS, task_class
 
@@ -62,13 +61,6 @@ class EnvSettings:
     max_episode_steps: int | None = field(
         default=None,
         metadata=_help(f"Steps per episode (default: {PLAIN_LIMIT}, or {CORRECTION_LIMIT} with corrections)."),
-    )
-    physics_hz: int = field(
-        default=PHYSICS_HZ,
-        metadata=_help(
-            f"Physics steps per simulated second, a multiple of {CONTROL_HZ} (default {PHYSICS_HZ}, which keeps "
-            "grasps stable; 250 halves the simulation's cost where nothing is grasped)."
-        ),
     )
     random_start: float = field(
         default=0.0,
@@ -119,7 +111,6 @@ class EnvSettings:
             object.__setattr__(self, "mode", Mode(self.mode))
         except ValueError:
             raise ValueError(f"mode must be one of {', '.join(Mode)}, got {self.mode!r}") from None
-        substeps(self.physics_hz)
         if self.max_episode_steps is not None and self.max_episode_steps < 1:
             raise ValueError(f"max_episode_steps must be positive, got {self.max_episode_steps}")
         if not 0.0 <= self.random_start <= 1.0:

@@ -3,9 +3,16 @@
 Nothing here knows about language, tasks or rewards.
 """
 
-from lanrocli.core.rates import CONTROL_DT, PHYSICS_HZ, SUBSTEPS
 from lanrocli.sim.camera import Camera, CameraPose
-from lanrocli.sim.layout import OBJECT_AREA, ROBOT_BASE, WORKSPACE, Box
+from lanrocli.sim.layout import (
+    CONTROL_DT,
+    OBJECT_AREA,
+    PHYSICS_HZ,
+    ROBOT_BASE,
+    SUBSTEPS,
+    WORKSPACE,
+    Box,
+)
 from lanrocli.sim.objects import (
     COLOURS,
     SHAPES,

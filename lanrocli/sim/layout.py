@@ -33,6 +33,15 @@ class Box:
         return bool(np.all(p >= np.asarray(self.low) - tolerance) and np.all(p <= np.asarray(self.high) + tolerance))
 
 
+PHYSICS_HZ = 500
+"""Physics rate (Hz); steps this small keep finger-object contacts stable in grasps."""
+
+SUBSTEPS = 20
+"""Physics steps per control action."""
+
+CONTROL_DT = SUBSTEPS / PHYSICS_HZ
+"""Seconds of simulated time per control action (0.04 s, i.e. 25 Hz)."""
+
 SOLVER_ITERATIONS = 20
 """Constraint solver iterations per physics step (PyBullet's default is 50).
 

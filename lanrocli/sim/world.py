@@ -18,12 +18,13 @@ import pybullet
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
 
-from lanrocli.core.rates import CONTROL_DT, PHYSICS_HZ, substeps
 from lanrocli.sim.camera import Camera, CameraPose
 from lanrocli.sim.layout import (
+    CONTROL_DT,
     FLOOR_HEIGHT,
     GRAVITY,
     SOLVER_ITERATIONS,
+    SUBSTEPS,
     TABLE_CENTRE,
     TABLE_HALF_EXTENTS,
     TABLE_LATERAL_FRICTION,
@@ -53,7 +54,7 @@ class World:
     """A PyBullet world with a table whose top is the plane z = 0, on a floor at its foot.
 
     One control step is a single ``stepSimulation`` call that PyBullet splits into
-    physics steps of 1 / ``physics_hz`` s (20 at the default ``PHYSICS_HZ``). That is faster than 20 calls from
+    ``SUBSTEPS`` physics steps of 1 / ``PHYSICS_HZ`` s. That is faster than 20 calls from
     Python (docs/performance.md), and gives bit-identical trajectories once motor force limits are
     multiplied by ``motor_force_scale``: PyBullet sizes the motors' impulse budget with the
     whole control step, not the physics step.
@@ -64,23 +65,13 @@ class World:
     ``images=False`` declares that nothing will ever draw this world (no camera image, no GUI), so the arm
     is loaded without its visual meshes, which take most of the time an environment takes to build;
     the physics are the same either way.
-
-    ``physics_hz`` below the default makes each control step cheaper: arm tracking and pushing hold at
-    250 Hz, while grasps keep their contacts stable at 500 (docs/performance.md).
     """
 
-    def __init__(
-        self,
-        gui: bool = False,
-        camera: CameraPose | None = None,
-        images: bool = True,
-        physics_hz: int = PHYSICS_HZ,
-    ) -> None:
+    def __init__(self, gui: bool = False, camera: CameraPose | None = None, images: bool = True) -> None:
         if gui and not images:
             raise ValueError("a world shown in the GUI is drawn: it needs images=True")
         camera = camera if camera is not None else CameraPose()
         self.images = images
-        self.substeps = substeps(physics_hz)
         with _native_stdout_silenced():
             self._client = BulletClient(connection_mode=pybullet.GUI if gui else pybullet.DIRECT)
         self._closed = False
@@ -88,7 +79,7 @@ class World:
         client.setAdditionalSearchPath(pybullet_data.getDataPath())
         client.setPhysicsEngineParameter(
             fixedTimeStep=CONTROL_DT,
-            numSubSteps=self.substeps,
+            numSubSteps=SUBSTEPS,
             numSolverIterations=SOLVER_ITERATIONS,
             deterministicOverlappingPairs=1,
         )
@@ -136,7 +127,7 @@ class World:
         Multiplying the physical limit (N or N m) by it makes the motors exert that limit
         during every physics substep.
         """
-        return 1.0 / self.substeps
+        return 1.0 / SUBSTEPS
 
     @property
     def steps(self) -> int:

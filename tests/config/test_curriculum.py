@@ -82,7 +82,6 @@ def test_env_section_is_the_environments_settings() -> None:
         "rare_words": False,
         "kinds": ["ambiguity"],
         "max_episode_steps": None,
-        "physics_hz": 500,
         "random_start": 0.0,
         "object_start": 0.0,
         "mistake_start": 0.0,

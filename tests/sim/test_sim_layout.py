@@ -2,12 +2,10 @@ from __future__ import annotations
 
 import numpy as np
 import pybullet
-import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from lanrocli.core.rates import substeps
-from lanrocli.sim import CONTROL_DT, OBJECT_AREA, PHYSICS_HZ, WORKSPACE, World
+from lanrocli.sim import CONTROL_DT, OBJECT_AREA, SUBSTEPS, WORKSPACE, World
 from lanrocli.sim.panda import URDF
 
 coordinate = st.floats(min_value=-10.0, max_value=10.0, allow_nan=False)
@@ -28,13 +26,11 @@ def test_workspace_surrounds_the_object_area() -> None:
     assert 0.0 < WORKSPACE.low[2] < 0.02
 
 
-@pytest.mark.parametrize("physics_hz", [PHYSICS_HZ, 250])
-def test_single_substepped_call_matches_explicit_substeps(physics_hz: int) -> None:
-    """The stepping scheme is only valid if scaled motor limits reproduce the plain physics steps."""
-    single, explicit = World(physics_hz=physics_hz), World()
-    steps = substeps(physics_hz)
+def test_single_substepped_call_matches_explicit_substeps() -> None:
+    """The stepping scheme is only valid if scaled motor limits reproduce 20 plain steps."""
+    single, explicit = World(), World()
     try:
-        explicit.client.setPhysicsEngineParameter(fixedTimeStep=CONTROL_DT / steps, numSubSteps=0)
+        explicit.client.setPhysicsEngineParameter(fixedTimeStep=CONTROL_DT / SUBSTEPS, numSubSteps=0)
         joints = list(range(7))
         bodies = [w.client.loadURDF(URDF, basePosition=[-0.5, 0, 0], useFixedBase=True) for w in (single, explicit)]
         targets = [0.3, 0.5, -0.2, -1.5, 0.1, 1.8, 0.4]
@@ -51,7 +47,7 @@ def test_single_substepped_call_matches_explicit_substeps(physics_hz: int) -> No
         )
         for _ in range(10):
             single.step_physics()
-            for _ in range(steps):
+            for _ in range(SUBSTEPS):
                 explicit.client.stepSimulation()
         a = [s[0] for s in single.client.getJointStates(bodies[0], joints)]
         b = [s[0] for s in explicit.client.getJointStates(bodies[1], joints)]
@@ -60,13 +56,3 @@ def test_single_substepped_call_matches_explicit_substeps(physics_hz: int) -> No
     finally:
         single.close()
         explicit.close()
-
-
-def test_a_slower_physics_rate_keeps_the_control_step_and_the_motor_budget() -> None:
-    world = World(physics_hz=250)
-    try:
-        world.step()
-        assert world.time == pytest.approx(CONTROL_DT)
-        assert world.motor_force_scale == pytest.approx(0.1)
-    finally:
-        world.close()
